@@ -1,0 +1,312 @@
+"""A PCA basis of isotropic BRDF tables: file format, the log-relative mapping, and evaluation.
+
+A BRDF table (MERL layout, N = 3·90·90·180 values in 1/sr, see :mod:`abs.io.merl`) is
+represented as ``unmap(mean + componentsᵀ · c)`` for a small coefficient vector ``c``, the
+model of Nielsen, Jensen and Ramamoorthi, "On optimal, minimal BRDF sampling for reflectance
+acquisition" (SIGGRAPH Asia 2015). Their mapping compresses the dynamic range of specular peaks
+and de-emphasises grazing angles:
+
+    x = log((f·w + ε) / (median·w + ε)),        f = ((median·w + ε)·exp(x) − ε) / w,
+
+with ``w`` the cosine weight cosθi·cosθo of each table entry (:func:`merl_cosine_weight`),
+``median`` a per-entry reference BRDF and ``ε`` a small offset.
+
+File format (``.npz``, read with ``allow_pickle=False``, so a file never runs code):
+
+=================  ===========  =========================================================
+array              shape        meaning
+=================  ===========  =========================================================
+``mean``           (N,)         mean of the mapped training tables
+``components``     (K, N)       scaled eigenvectors Q = VΣ, one row per component
+``median``         (N,)         per-entry reference BRDF of the mapping, 1/sr, >= 0
+``cosine_weight``  (N,)         optional: ``w``; :func:`merl_cosine_weight` when absent
+``epsilon``        ()           ε of the mapping, 1/sr, > 0
+``format_version`` ()           1
+=================  ===========  =========================================================
+"""
+
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from abs.errors import InputError
+from abs.io.merl import MERL_SIZE, merl_sample_angles
+
+__all__ = [
+    "FORMAT_VERSION",
+    "COSINE_WEIGHT_MIN",
+    "BRDFBasis",
+    "merl_cosine_weight",
+    "map_brdf",
+    "unmap_brdf",
+    "table_from_coefficients",
+]
+
+FORMAT_VERSION = 1
+COSINE_WEIGHT_MIN = 1e-3
+"""Lower clip of the cosine weight. Entries with a direction at or below the horizon have
+cosθi·cosθo <= 0; clipping keeps the mapping defined there, and at 1e-3 (the order of a typical
+ε) the inverse mapping's ε/w term stays O(1), so reconstruction errors are not blown up."""
+
+_REQUIRED = ("mean", "components", "median", "epsilon", "format_version")
+_OPTIONAL = ("cosine_weight",)
+
+
+def merl_cosine_weight(min_weight: float = COSINE_WEIGHT_MIN) -> np.ndarray:
+    """Cosine weight cosθi·cosθo at every MERL sample position, clipped below.
+
+    With h = (sinθh, 0, cosθh) and d = (sinθd cosφd, sinθd sinφd, cosθd) in the half-vector frame,
+    rotating d and its mirror image about h back to the normal frame gives
+    cosθo = cosθd cosθh − sinθd cosφd sinθh and cosθi = cosθd cosθh + sinθd cosφd sinθh.
+
+    Parameters
+    ----------
+    min_weight : float
+        Lower clip (dimensionless); also applied to below-horizon entries.
+
+    Returns
+    -------
+    np.ndarray
+        float32 array of shape (N,) in MERL order, the same weight repeated for R, G and B.
+    """
+    theta_h, theta_d, phi_d = merl_sample_angles()
+    along = np.cos(theta_d) * np.cos(theta_h)
+    across = np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
+    weight = np.maximum((along + across) * (along - across), min_weight)
+    return np.tile(weight.ravel(), 3).astype(np.float32)
+
+
+def map_brdf(f: np.ndarray, median: np.ndarray, w: np.ndarray, eps: float) -> np.ndarray:
+    """Log-relative mapping x = log((f·w + ε) / (median·w + ε)).
+
+    Parameters
+    ----------
+    f : np.ndarray
+        BRDF values, 1/sr, >= 0 (arrays broadcast together).
+    median : np.ndarray
+        Reference BRDF values, 1/sr, >= 0.
+    w : np.ndarray
+        Cosine weights, dimensionless, > 0.
+    eps : float
+        Offset ε, 1/sr, > 0.
+
+    Returns
+    -------
+    np.ndarray
+        Mapped values (dimensionless), in the floating-point precision of the inputs.
+    """
+    f, median, w = np.asarray(f), np.asarray(median), np.asarray(w)
+    return np.log((f * w + eps) / (median * w + eps))
+
+
+def unmap_brdf(x: np.ndarray, median: np.ndarray, w: np.ndarray, eps: float) -> np.ndarray:
+    """Inverse of :func:`map_brdf`: f = ((median·w + ε)·exp(x) − ε) / w.
+
+    No clamping: values of ``x`` below the image of f = 0 give negative f (the exact inverse).
+    :func:`table_from_coefficients` clamps at 0 for rendering.
+    """
+    x, median, w = np.asarray(x), np.asarray(median), np.asarray(w)
+    return ((median * w + eps) * np.exp(x) - eps) / w
+
+
+def _check_vector(source: str | None, name: str, value: np.ndarray) -> None:
+    if value.shape != (MERL_SIZE,):
+        raise InputError(source, name, f"expected shape ({MERL_SIZE},) = 3*90*90*180, got {value.shape}")
+
+
+def _check_finite(source: str | None, name: str, value: np.ndarray) -> None:
+    if not np.isfinite(value).all():
+        raise InputError(source, name, "holds NaN or infinite values")
+
+
+def _as_float(source: str | None, name: str, value: Any) -> np.ndarray:
+    array = np.asarray(value)
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise InputError(source, name, f"expected a numeric array, got dtype {array.dtype}")
+    return array.astype(np.float32, copy=False)
+
+
+@dataclass(frozen=True, eq=False)
+class BRDFBasis:
+    """A PCA basis of mapped MERL tables (see the module docstring for the model).
+
+    Parameters
+    ----------
+    mean : np.ndarray
+        (N,) mean of the mapped tables.
+    components : np.ndarray
+        (K, N) scaled eigenvectors, one row per component.
+    median : np.ndarray
+        (N,) reference BRDF of the mapping, 1/sr, >= 0.
+    epsilon : float
+        ε of the mapping, 1/sr, > 0.
+    cosine_weight : np.ndarray, optional
+        (N,) weights ``w`` > 0; :func:`merl_cosine_weight` when omitted.
+    source : str, optional
+        The file the basis came from, used in error messages.
+
+    Arrays are stored as float32 (K·N·4 bytes for the components). Their Dr.Jit copies are made
+    once per variant on first use by :func:`table_from_coefficients`: treat the arrays as
+    read-only.
+    """
+
+    mean: np.ndarray
+    components: np.ndarray
+    median: np.ndarray
+    epsilon: float
+    cosine_weight: np.ndarray | None = None
+    source: str | None = field(default=None, repr=False)
+    # Dr.Jit copies of the arrays, per Mitsuba variant (filled on first use).
+    _device: dict = field(default_factory=dict, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        src = self.source
+        mean = _as_float(src, "mean", self.mean)
+        median = _as_float(src, "median", self.median)
+        components = _as_float(src, "components", self.components)
+        _check_vector(src, "mean", mean)
+        _check_vector(src, "median", median)
+        if components.ndim != 2 or components.shape[1] != MERL_SIZE or components.shape[0] < 1:
+            raise InputError(
+                src, "components", f"expected shape (K, {MERL_SIZE}) with K >= 1, got {components.shape}"
+            )
+        for name, value in (("mean", mean), ("median", median), ("components", components)):
+            _check_finite(src, name, value)
+        if (median < 0).any():
+            raise InputError(src, "median", "BRDF values must be >= 0")
+        if self.cosine_weight is None:
+            weight = merl_cosine_weight()
+        else:
+            weight = _as_float(src, "cosine_weight", self.cosine_weight)
+            _check_vector(src, "cosine_weight", weight)
+            if not (np.isfinite(weight).all() and (weight > 0).all()):
+                raise InputError(src, "cosine_weight", "weights must be finite and > 0")
+        epsilon = np.asarray(self.epsilon)
+        if epsilon.shape != () or not np.issubdtype(epsilon.dtype, np.number):
+            raise InputError(src, "epsilon", f"expected a number, got {epsilon!r}")
+        if not (np.isfinite(epsilon) and epsilon > 0):
+            raise InputError(src, "epsilon", f"must be finite and > 0, got {float(epsilon)}")
+        object.__setattr__(self, "mean", mean)
+        object.__setattr__(self, "median", median)
+        object.__setattr__(self, "components", np.ascontiguousarray(components))
+        object.__setattr__(self, "cosine_weight", weight)
+        object.__setattr__(self, "epsilon", float(epsilon))
+
+    @property
+    def n_components(self) -> int:
+        """Number of components K."""
+        return int(self.components.shape[0])
+
+    # -- files ----------------------------------------------------------------------------------
+    @classmethod
+    def load(cls, path: str | Path) -> BRDFBasis:
+        """Read a basis ``.npz`` (never unpickles; see the module docstring for the arrays).
+
+        Raises
+        ------
+        InputError
+            Naming the file and the array when the file is unreadable, lacks an array, holds
+            pickled objects, or an array has the wrong shape, type or values.
+        """
+        path = Path(path)
+        src = str(path)
+        try:
+            archive = np.load(path, allow_pickle=False)
+        except (OSError, ValueError, zipfile.BadZipFile) as err:
+            raise InputError(src, "", f"cannot read as a NumPy .npz archive: {err}") from err
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise InputError(src, "", "expected a .npz archive of named arrays, got a single .npy array")
+        arrays: dict[str, np.ndarray] = {}
+        with archive:
+            for name in _REQUIRED + _OPTIONAL:
+                if name not in archive.files:
+                    if name in _REQUIRED:
+                        raise InputError(src, name, "missing from the archive")
+                    continue
+                try:
+                    arrays[name] = archive[name]
+                except ValueError as err:  # object arrays need pickle, which is refused
+                    raise InputError(src, name, f"cannot be loaded without unpickling ({err})") from err
+        version = arrays["format_version"]
+        is_int = version.shape == () and np.issubdtype(version.dtype, np.integer)
+        if not is_int or int(version) != FORMAT_VERSION:
+            raise InputError(src, "format_version", f"expected {FORMAT_VERSION}, got {version!r}")
+        return cls(
+            mean=arrays["mean"],
+            components=arrays["components"],
+            median=arrays["median"],
+            epsilon=arrays["epsilon"],
+            cosine_weight=arrays.get("cosine_weight"),
+            source=src,
+        )
+
+    def save(self, path: str | Path) -> None:
+        """Write the basis as an uncompressed ``.npz`` at exactly ``path`` (no suffix added)."""
+        with open(path, "wb") as file:
+            np.savez(
+                file,
+                mean=self.mean,
+                components=self.components,
+                median=self.median,
+                cosine_weight=self.cosine_weight,
+                epsilon=np.float64(self.epsilon),
+                format_version=np.int64(FORMAT_VERSION),
+            )
+
+    # -- Dr.Jit ---------------------------------------------------------------------------------
+    def _device_arrays(self) -> dict[str, Any]:
+        """Dr.Jit copies of the arrays for the active variant, built once."""
+        import mitsuba as mi
+
+        variant = mi.variant()
+        cached = self._device.get(variant)
+        if cached is None:
+            eps = self.epsilon
+            w = self.cosine_weight.astype(np.float64)
+            # Precompute the unmap's affine terms: f = offset·exp(x)·inv_w − eps·inv_w.
+            cached = {
+                "mean": mi.Float(self.mean),
+                "components": [mi.Float(row) for row in self.components],
+                "scale": mi.Float(((self.median * w + eps) / w).astype(np.float32)),
+                "shift": mi.Float((eps / w).astype(np.float32)),
+            }
+            self._device[variant] = cached
+        return cached
+
+
+def table_from_coefficients(basis: BRDFBasis, coefficients: Any) -> Any:
+    """BRDF table unmap(mean + componentsᵀ·c), differentiable with respect to ``c``.
+
+    Parameters
+    ----------
+    basis : BRDFBasis
+        The basis.
+    coefficients : mi.Float
+        K coefficients (dimensionless). Gradients flow back to them through Dr.Jit's AD.
+
+    Returns
+    -------
+    mi.Float
+        N = 3·90·90·180 BRDF values in 1/sr, MERL order, clamped at 0 (so entries whose
+        reconstruction is negative have zero gradient).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    arrays = basis._device_arrays()
+    coefficients = mi.Float(coefficients)
+    if dr.width(coefficients) != basis.n_components:
+        raise ValueError(
+            f"expected {basis.n_components} coefficients (one per component), got {dr.width(coefficients)}"
+        )
+    x = arrays["mean"]
+    for k, row in enumerate(arrays["components"]):
+        # A width-1 gather keeps c[k] attached to the AD graph (indexing would return a Python float).
+        c_k = dr.gather(mi.Float, coefficients, mi.UInt32(k))
+        x = dr.fma(row, c_k, x)
+    return dr.maximum(arrays["scale"] * dr.exp(x) - arrays["shift"], 0.0)

@@ -1,0 +1,474 @@
+"""Capture folders: photographs plus their calibrated OpenCV cameras (a public contract).
+
+A capture folder holds ``cameras.json`` next to the photographs::
+
+    {"views": [{"name": "v0", "image": "v0.exr",
+                "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
+                "R": [[...], [...], [...]], "t": [tx, ty, tz],
+                "holdout": false, "mask": "v0_mask.png"}]}
+
+- ``name``: unique, usable as a file name (letters, digits, ``_``, ``-``, ``.``; not starting
+  with ``.`` or ``-``; at most 128 characters).
+- ``image``: photograph path relative to the folder (or absolute); EXR, HDR, PNG or JPEG
+  (see :mod:`abs.io.images`).
+- ``K`` (pixels), ``R``, ``t`` (metres): OpenCV convention of docs/conventions.md,
+  ``x_cam = R @ X_world + t``. ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with fx, fy > 0.
+- ``holdout`` (optional, default false): the view is kept out of fitting, for validation.
+- ``mask`` (optional): image of the photograph's size whose nonzero pixels are compared.
+
+Keys of a view starting with ``_`` are comments and ignored; other unknown keys are errors, so a
+typo such as ``holdOut`` cannot silently change meaning. Unknown top-level keys are ignored.
+Every error is a :class:`abs.errors.CaptureError` naming ``cameras.json`` and the field, e.g.
+``captures/mug/cameras.json: views[2].R: not orthonormal ...``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from abs.errors import CaptureError, InputError
+from abs.io.images import (IMAGE_EXTENSIONS, image_size, read_image, read_mask, write_exr,
+                           write_mask)
+
+__all__ = ["CAMERAS_FILE", "View", "Capture", "load_capture", "save_capture"]
+
+CAMERAS_FILE = "cameras.json"
+ROTATION_TOL = 1e-5  # max |R^T R - I| and |det R - 1| accepted as a rotation
+_NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
+_VIEW_KEYS = {"name", "image", "K", "R", "t", "holdout", "mask"}
+_REQUIRED_KEYS = ("name", "image", "K", "R", "t")
+
+
+# --------------------------------------------------------------------------------------------
+# Field validators: each returns the clean value or raises CaptureError(source, field, ...).
+
+
+def _matrix(value: Any, shape: tuple[int, ...], source: Path | None, field: str) -> np.ndarray:
+    """``value`` as a finite float64 array of ``shape``."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.shape != shape or isinstance(value, (str, bytes)):
+        what = "x".join(map(str, shape))
+        raise CaptureError(source, field, f"expected a {what} array of numbers, got {value!r}")
+    if not np.all(np.isfinite(arr)):
+        raise CaptureError(source, field, f"values must be finite, got {arr.tolist()}")
+    return arr
+
+
+def _check_name(value: Any, source: Path | None, field: str) -> str:
+    if not isinstance(value, str) or not _NAME_RE.fullmatch(value) or value.endswith("."):
+        raise CaptureError(source, field, f"{value!r} is not usable as a file name (letters, "
+                                          "digits, '_', '-', '.'; not starting with '.' or '-')")
+    return value
+
+
+def _check_K(value: Any, source: Path | None, field: str) -> np.ndarray:
+    K = _matrix(value, (3, 3), source, field)
+    if K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise CaptureError(source, field, f"focal lengths fx = K[0][0] and fy = K[1][1] must be "
+                                          f"> 0 pixels, got fx = {K[0, 0]}, fy = {K[1, 1]}")
+    if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
+        raise CaptureError(source, field, "expected the form [[fx, s, cx], [0, fy, cy], "
+                                          f"[0, 0, 1]], got {K.tolist()}")
+    # Redundant with the form above (det = fx * fy), kept so that no singular K ever passes.
+    if abs(np.linalg.det(K)) < 1e-12 or np.linalg.cond(K) > 1e12:
+        raise CaptureError(source, field, f"K is singular (not invertible): {K.tolist()}")
+    return K
+
+
+def _check_R(value: Any, source: Path | None, field: str) -> np.ndarray:
+    R = _matrix(value, (3, 3), source, field)
+    off = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if off > ROTATION_TOL:
+        raise CaptureError(source, field, f"not orthonormal: max |R^T R - I| = {off:.3g} > "
+                                          f"{ROTATION_TOL:g}")
+    det = float(np.linalg.det(R))
+    if abs(det - 1.0) > ROTATION_TOL:
+        raise CaptureError(source, field, f"det(R) = {det:.6g}, expected +1 (a rotation, not a "
+                                          "reflection)")
+    return R
+
+
+def _check_t(value: Any, source: Path | None, field: str) -> np.ndarray:
+    return _matrix(value, (3,), source, field)
+
+
+def _check_holdout(value: Any, source: Path | None, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise CaptureError(source, field, f"expected true or false, got {value!r}")
+    return value
+
+
+def _read_only(arr: np.ndarray) -> np.ndarray:
+    arr = np.array(arr, dtype=np.float64)
+    arr.setflags(write=False)
+    return arr
+
+
+# --------------------------------------------------------------------------------------------
+# Data model
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One calibrated photograph.
+
+    Attributes
+    ----------
+    name : str
+        Unique view name, usable as a file name.
+    image : Path
+        Absolute path of the photograph.
+    K : np.ndarray
+        (3, 3) intrinsics, pixels, float64, read-only.
+    R : np.ndarray
+        (3, 3) world-to-camera rotation, read-only.
+    t : np.ndarray
+        (3,) world-to-camera translation, metres, read-only.
+    width, height : int
+        Photograph size, pixels.
+    holdout : bool
+        Kept out of fitting (validation view).
+    mask : Path or None
+        Absolute path of the comparison mask (nonzero = compared), or ``None`` for all pixels.
+    """
+
+    name: str
+    image: Path
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    holdout: bool = False
+    mask: Path | None = None
+
+    def __post_init__(self) -> None:
+        where = f"View({self.name!r})"
+        _check_name(self.name, None, f"{where}.name")
+        object.__setattr__(self, "image", Path(self.image))
+        object.__setattr__(self, "K", _read_only(_check_K(self.K, None, f"{where}.K")))
+        object.__setattr__(self, "R", _read_only(_check_R(self.R, None, f"{where}.R")))
+        object.__setattr__(self, "t", _read_only(_check_t(self.t, None, f"{where}.t")))
+        if self.mask is not None:
+            object.__setattr__(self, "mask", Path(self.mask))
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise CaptureError(None, f"{where}.size", f"invalid size {self.width}x{self.height}")
+
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in world coordinates, ``-R^T t``, metres."""
+        return -self.R.T @ self.t
+
+    def read_image(self) -> np.ndarray:
+        """The photograph as ``(height, width, 3)`` linear RGB ``float32``."""
+        return read_image(self.image)
+
+    def read_mask(self) -> np.ndarray:
+        """The ``(height, width)`` boolean mask, all ``True`` when the view has none."""
+        if self.mask is None:
+            return np.ones((self.height, self.width), dtype=bool)
+        return read_mask(self.mask, (self.height, self.width))
+
+
+@dataclass(frozen=True, eq=False)
+class Capture:
+    """A loaded capture folder.
+
+    Attributes
+    ----------
+    folder : Path
+        Absolute path of the capture folder.
+    views : tuple of View
+        All views, in file order.
+    """
+
+    folder: Path
+    views: tuple[View, ...]
+
+    @property
+    def source(self) -> Path:
+        """Path of the ``cameras.json`` file."""
+        return self.folder / CAMERAS_FILE
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """View names, in file order."""
+        return tuple(v.name for v in self.views)
+
+    @property
+    def train_views(self) -> tuple[View, ...]:
+        """Views used for fitting (``holdout`` false)."""
+        return tuple(v for v in self.views if not v.holdout)
+
+    @property
+    def holdout_views(self) -> tuple[View, ...]:
+        """Views kept out of fitting (``holdout`` true)."""
+        return tuple(v for v in self.views if v.holdout)
+
+    def view(self, name: str) -> View:
+        """The view called ``name``; ``KeyError`` listing the known names otherwise."""
+        for v in self.views:
+            if v.name == name:
+                return v
+        raise KeyError(f"{self.source}: no view named {name!r}; views are "
+                       f"{', '.join(self.names)}")
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+
+
+def _resolve(folder: Path, value: Any, source: Path, field: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise CaptureError(source, field, f"expected a file path string, got {value!r}")
+    path = Path(value)
+    return path if path.is_absolute() else (folder / path)
+
+
+def _image_size(path: Path, source: Path, field: str, extensions: tuple[str, ...]) -> tuple[int, int]:
+    """Header size of a referenced image; file problems become errors on ``field``."""
+    if not path.is_file():
+        raise CaptureError(source, field, f"file not found: {path}")
+    if path.suffix.lower() not in extensions:
+        raise CaptureError(source, field, f"unsupported image format {path.suffix!r}; expected "
+                                          f"one of {', '.join(extensions)}")
+    try:
+        return image_size(path)
+    except InputError as exc:
+        raise CaptureError(source, field, f"{path}: {exc.message}") from exc
+
+
+def _parse_view(entry: Any, index: int, folder: Path, source: Path) -> View:
+    field = f"views[{index}]"
+    if not isinstance(entry, dict):
+        raise CaptureError(source, field, f"expected an object, got {type(entry).__name__}")
+    unknown = sorted(k for k in entry if k not in _VIEW_KEYS and not k.startswith("_"))
+    if unknown:
+        raise CaptureError(source, f"{field}.{unknown[0]}", f"unknown key; allowed keys are "
+                                                            f"{', '.join(sorted(_VIEW_KEYS))}")
+    for key in _REQUIRED_KEYS:
+        if key not in entry:
+            raise CaptureError(source, f"{field}.{key}", "missing")
+    name = _check_name(entry["name"], source, f"{field}.name")
+    K = _check_K(entry["K"], source, f"{field}.K")
+    R = _check_R(entry["R"], source, f"{field}.R")
+    t = _check_t(entry["t"], source, f"{field}.t")
+    holdout = _check_holdout(entry.get("holdout", False), source, f"{field}.holdout")
+    image = _resolve(folder, entry["image"], source, f"{field}.image")
+    width, height = _image_size(image, source, f"{field}.image", IMAGE_EXTENSIONS)
+    mask = None
+    if entry.get("mask") is not None:
+        mask = _resolve(folder, entry["mask"], source, f"{field}.mask")
+        mask_size = _image_size(mask, source, f"{field}.mask",
+                                (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".exr"))
+        if mask_size != (width, height):
+            raise CaptureError(source, f"{field}.mask", f"mask is {mask_size[0]}x{mask_size[1]} "
+                                                        f"pixels, photograph {width}x{height}")
+    return View(name=name, image=image.absolute(), K=K, R=R, t=t, width=width, height=height,
+                holdout=holdout, mask=None if mask is None else mask.absolute())
+
+
+def load_capture(folder: str | Path) -> Capture:
+    """Load and validate a capture folder.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The capture folder, or its ``cameras.json`` file directly.
+
+    Returns
+    -------
+    Capture
+        Views in file order with absolute paths and header-read image sizes (pixels are not
+        decoded here; use :meth:`View.read_image`).
+
+    Raises
+    ------
+    CaptureError
+        Naming ``cameras.json`` and the offending field (``views[i].K`` etc.) when the file is
+        missing, not JSON, or any view is invalid: non-finite or wrongly shaped numbers, fx or
+        fy <= 0, ``K[2] != [0, 0, 1]``, singular K, R not orthonormal or det(R) != +1
+        (tolerance 1e-5), duplicate or unusable names, missing image or mask files, a mask whose
+        size differs from its photograph.
+    """
+    path = Path(folder)
+    if path.suffix.lower() == ".json" and not path.is_dir():
+        source, folder = path, path.parent
+    else:
+        source, folder = path / CAMERAS_FILE, path
+    folder = folder.absolute()
+    if not source.is_file():
+        raise CaptureError(source, "", "no such file (a capture folder needs cameras.json)")
+    try:
+        data = json.loads(source.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise CaptureError(source, "", f"not valid JSON: {exc.msg} at line {exc.lineno}, "
+                                       f"column {exc.colno}") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CaptureError(source, "", f"cannot read: {exc}") from exc
+    if not isinstance(data, dict):
+        raise CaptureError(source, "", f"expected a JSON object with a 'views' list, got "
+                                       f"{type(data).__name__}")
+    views = data.get("views")
+    if not isinstance(views, list) or not views:
+        raise CaptureError(source, "views", f"expected a non-empty list of views, got {views!r}")
+    parsed: list[View] = []
+    seen: dict[str, int] = {}
+    for i, entry in enumerate(views):
+        view = _parse_view(entry, i, folder, source)
+        if view.name in seen:
+            raise CaptureError(source, f"views[{i}].name", f"duplicate name {view.name!r} "
+                                                           f"(also views[{seen[view.name]}])")
+        seen[view.name] = i
+        parsed.append(view)
+    return Capture(folder=folder, views=tuple(parsed))
+
+
+# --------------------------------------------------------------------------------------------
+# Saving
+
+
+def _json_view(view: View, folder: Path) -> str:
+    """One view as compact JSON, one key per line and matrices row by row."""
+    def rel(path: Path) -> str:
+        try:
+            return path.relative_to(folder).as_posix()
+        except ValueError:
+            return str(path)
+
+    rows = lambda m: "[" + ", ".join(json.dumps([float(x) for x in r]) for r in m) + "]"  # noqa: E731
+    lines = [f'"name": {json.dumps(view.name)}',
+             f'"image": {json.dumps(rel(view.image))}',
+             f'"K": {rows(view.K)}',
+             f'"R": {rows(view.R)}',
+             f'"t": {json.dumps([float(x) for x in view.t])}',
+             f'"holdout": {json.dumps(view.holdout)}']
+    if view.mask is not None:
+        lines.append(f'"mask": {json.dumps(rel(view.mask))}')
+    return "    {\n      " + ",\n      ".join(lines) + "\n    }"
+
+
+def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
+                 images: Mapping[str, np.ndarray] | None = None,
+                 masks: Mapping[str, np.ndarray] | None = None) -> Capture:
+    """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks and
+    ``cameras.json`` (written last, atomically), then load it back.
+
+    Parameters
+    ----------
+    folder : str or Path
+        Destination folder, created if needed; existing files of the same names are replaced.
+    views : sequence of View or mapping
+        Cameras in order. A mapping has keys ``name``, ``K``, ``R``, ``t`` and optionally
+        ``holdout`` (arrays or nested lists). File names are always chosen by this function.
+    images : mapping of str to np.ndarray, optional
+        Photograph per view name, ``(height, width, 3)`` linear RGB. A view missing here must be
+        a :class:`View`, whose existing photograph is copied (re-encoded as EXR).
+    masks : mapping of str to np.ndarray, optional
+        ``(height, width)`` masks (nonzero = compared) per view name. A :class:`View` missing
+        here keeps its existing mask, if any.
+
+    Returns
+    -------
+    Capture
+        The capture as :func:`load_capture` reads it back.
+
+    Raises
+    ------
+    CaptureError
+        For invalid cameras, names, images or masks (source ``None``: the values came from
+        Python; fields as in ``cameras.json``, e.g. ``views[1].R``).
+    """
+    folder = Path(folder).absolute()
+    images = dict(images or {})
+    masks = dict(masks or {})
+    if not views:
+        raise CaptureError(None, "views", "expected at least one view")
+
+    # Validate everything before writing anything.
+    prepared: list[tuple[dict[str, Any], np.ndarray, np.ndarray | None]] = []
+    seen: set[str] = set()
+    for i, item in enumerate(views):
+        field = f"views[{i}]"
+        if isinstance(item, View):
+            spec = {"name": item.name, "K": item.K, "R": item.R, "t": item.t,
+                    "holdout": item.holdout}
+        elif isinstance(item, Mapping):
+            spec = dict(item)
+            unknown = sorted(set(spec) - {"name", "K", "R", "t", "holdout"})
+            if unknown:
+                raise CaptureError(None, f"{field}.{unknown[0]}", "unknown key; expected name, K, "
+                                                                  "R, t, holdout")
+        else:
+            raise CaptureError(None, field, f"expected a View or a mapping, got "
+                                            f"{type(item).__name__}")
+        for key in ("name", "K", "R", "t"):
+            if key not in spec:
+                raise CaptureError(None, f"{field}.{key}", "missing")
+        name = _check_name(spec["name"], None, f"{field}.name")
+        if name in seen:
+            raise CaptureError(None, f"{field}.name", f"duplicate name {name!r}")
+        seen.add(name)
+        spec = {"name": name, "K": _check_K(spec["K"], None, f"{field}.K"),
+                "R": _check_R(spec["R"], None, f"{field}.R"),
+                "t": _check_t(spec["t"], None, f"{field}.t"),
+                "holdout": _check_holdout(spec.get("holdout", False), None, f"{field}.holdout")}
+
+        if name in images:
+            rgb = np.asarray(images[name])
+        elif isinstance(item, View):
+            rgb = item.read_image()
+        else:
+            raise CaptureError(None, f"images[{name!r}]", "missing photograph for this view")
+        if rgb.ndim != 3 or rgb.shape[2] != 3 or 0 in rgb.shape:
+            raise CaptureError(None, f"images[{name!r}]", f"expected shape (height, width, 3), "
+                                                          f"got {rgb.shape}")
+        bad = int(np.count_nonzero(~np.isfinite(rgb)))
+        if bad:
+            raise CaptureError(None, f"images[{name!r}]", f"{bad} non-finite values (NaN or Inf)")
+
+        mask = None
+        if name in masks:
+            mask = np.asarray(masks[name])
+            if mask.ndim == 3:
+                mask = np.any(mask != 0, axis=-1)
+            if mask.shape != rgb.shape[:2]:
+                raise CaptureError(None, f"masks[{name!r}]", f"shape {mask.shape} differs from "
+                                                             f"the photograph's {rgb.shape[:2]}")
+            if not np.any(mask):
+                raise CaptureError(None, f"masks[{name!r}]", "mask is all zero")
+        elif isinstance(item, View) and item.mask is not None:
+            mask = item.read_mask()
+        prepared.append((spec, rgb, mask))
+    for what, given in (("images", images), ("masks", masks)):
+        if unused := sorted(set(given) - seen):
+            raise CaptureError(None, f"{what}[{unused[0]!r}]", "no view has this name")
+
+    folder.mkdir(parents=True, exist_ok=True)
+    saved: list[View] = []
+    for spec, rgb, mask in prepared:
+        image_path = folder / f"{spec['name']}.exr"
+        write_exr(image_path, rgb)
+        mask_path = None
+        if mask is not None:
+            mask_path = folder / f"{spec['name']}_mask.png"
+            write_mask(mask_path, mask)
+        saved.append(View(image=image_path, width=rgb.shape[1], height=rgb.shape[0],
+                          mask=mask_path, **spec))
+
+    text = '{\n  "views": [\n' + ",\n".join(_json_view(v, folder) for v in saved) + "\n  ]\n}\n"
+    tmp = folder / f".{CAMERAS_FILE}.tmp"
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, folder / CAMERAS_FILE)
+    return load_capture(folder)

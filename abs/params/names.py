@@ -1,0 +1,69 @@
+"""The catalogue of a scene's differentiable parameters.
+
+Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
+``environment.rotation``, ``<object>.pose``. Each has a size (3 for per-channel quantities), a
+unit and physical bounds; fitting code (later) maps bounds to unconstrained variables.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Parameter", "parameter_specs"]
+
+INF = float("inf")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A differentiable scene parameter.
+
+    Attributes
+    ----------
+    name : str
+        ``<owner>.<field>``.
+    size : int
+        Number of scalars (-1: known only once the scene is compiled, e.g. a texture).
+    unit : str
+        Physical unit of each scalar.
+    lower, upper : float
+        Inclusive physical bounds.
+    initial : ndarray or None
+        Value in the scene file.
+    """
+
+    name: str
+    size: int
+    unit: str
+    lower: float
+    upper: float
+    initial: np.ndarray | None
+
+    @property
+    def owner(self) -> str:
+        return self.name.split(".", 1)[0]
+
+    @property
+    def field(self) -> str:
+        return self.name.split(".", 1)[1]
+
+
+def parameter_specs(scene) -> dict[str, Parameter]:
+    """All differentiable parameters of a :class:`~abs.scene.scene.Scene`, by name."""
+    env = scene.environment
+    specs = {
+        "environment.scale": Parameter("environment.scale", 1, "1", 0.0, INF, np.array([env.scale])),
+        "environment.rotation": Parameter("environment.rotation", 1, "rad", -INF, INF,
+                                          np.array([env.rotation])),
+    }
+    for name, material in scene.materials.items():
+        for field, spec in material.parameters().items():
+            initial = material.value(field) if spec.size != -1 and field in material._toml else None
+            specs[f"{name}.{field}"] = Parameter(f"{name}.{field}", spec.size, spec.unit,
+                                                 spec.lower, spec.upper, initial)
+    for obj in scene.objects:
+        specs[f"{obj.name}.pose"] = Parameter(f"{obj.name}.pose", 6, "m, m, m, rad, rad, rad",
+                                              -INF, INF, np.asarray(obj.pose, dtype=np.float64))
+    return specs

@@ -1,0 +1,71 @@
+"""Camera rays in the OpenCV pinhole convention (docs/conventions.md), generated in Dr.Jit.
+
+abs generates primary rays itself rather than through Mitsuba's ``perspective`` sensor: the
+calibration (``K`` with fx != fy, skew, any principal point) maps to rays exactly, and the
+reparameterised ray of a sample can be projected back to its attached image position, which the
+pixel filter needs for visibility gradients (:mod:`abs.render.reparam`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+__all__ = ["Camera"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A calibrated pinhole camera.
+
+    Parameters
+    ----------
+    K : ndarray, shape (3, 3)
+        Intrinsics in pixels.
+    R : ndarray, shape (3, 3)
+        World-to-camera rotation, ``x_cam = R @ X + t``.
+    t : ndarray, shape (3,)
+        World-to-camera translation in metres.
+    width, height : int
+        Image size in pixels.
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+
+    @classmethod
+    def from_view(cls, view) -> "Camera":
+        """From a :class:`abs.io.capture.View`."""
+        return cls(np.asarray(view.K, float), np.asarray(view.R, float), np.asarray(view.t, float),
+                   int(view.width), int(view.height))
+
+    @property
+    def center(self) -> np.ndarray:
+        """Camera centre in world coordinates (metres)."""
+        return -self.R.T @ self.t
+
+    def _mats(self):
+        kinv = np.linalg.inv(self.K)
+        return (mi.Matrix3f(kinv.astype(np.float32)), mi.Matrix3f(self.R.T.astype(np.float32)),
+                mi.Matrix3f(self.K.astype(np.float32)), mi.Matrix3f(self.R.astype(np.float32)))
+
+    def rays(self, u: mi.Float, v: mi.Float) -> tuple[mi.Point3f, mi.Vector3f]:
+        """World-space unit rays through continuous pixel positions ``(u, v)``."""
+        kinv, rt, _, _ = self._mats()
+        d_cam = kinv @ mi.Vector3f(u, v, 1.0)
+        d = dr.normalize(rt @ d_cam)
+        return mi.Point3f(*[float(x) for x in self.center]), d
+
+    def project_direction(self, d: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
+        """Pixel position of world direction ``d`` from the centre, and the cosine between ``d``
+        and the optical axis (for the solid-angle Jacobian ``cos^3``)."""
+        _, _, k, r = self._mats()
+        x = r @ d
+        p = k @ x
+        return p.x / p.z, p.y / p.z, x.z / dr.norm(x)

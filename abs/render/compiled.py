@@ -1,0 +1,187 @@
+"""A :class:`~abs.scene.scene.Scene` compiled to a differentiable Mitsuba scene.
+
+:class:`CompiledScene` is the one bridge between abs's scene representation and Dr.Jit: it owns
+the Mitsuba scene, the environment, and the bindings that write each named parameter
+(``glass.ior``, ``sphere.pose``...) into them. Any value written may be attached to the AD graph;
+renders then differentiate with respect to it::
+
+    cs = compile_scene(load_scene("scenes/default/scene.toml"))
+    x = mi.Float([2.0, 1.0, 0.5]); dr.enable_grad(x)
+    cs.set("glass.absorption", x)
+    image = cs.render(camera, spp=16, seed=0)
+    dr.backward(dr.mean(image, axis=None)); dr.grad(x)
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from abs.errors import SceneError
+from abs.params.names import Parameter, parameter_specs
+from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
+from abs.render.camera import Camera
+from abs.render.environment import Environment
+from abs.render.integrator import PathTracer
+from abs.scene.scene import Scene
+
+__all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
+
+
+def rotation_matrix(r) -> mi.Matrix3f:
+    """Rotation matrix of a rotation vector ``r`` (axis * angle, radians); differentiable at 0."""
+    theta2 = dr.squared_norm(r)
+    theta = dr.sqrt(theta2 + 1e-24)
+    small = theta2 < 1e-8
+    a = dr.select(small, 1.0 - theta2 / 6.0, dr.sin(theta) / theta)
+    b = dr.select(small, 0.5 - theta2 / 24.0, (1.0 - dr.cos(theta)) / dr.square(theta))
+    x, y, z = r.x, r.y, r.z
+    k = mi.Matrix3f(0.0, -z, y, z, 0.0, -x, -y, x, 0.0)
+    return mi.Matrix3f(1.0) + a * k + b * (k @ k)
+
+
+def _mesh_dict(obj) -> dict:
+    kind = "ply" if obj.mesh.suffix.lower() == ".ply" else "obj"
+    return {"type": kind, "filename": str(obj.mesh),
+            "to_world": mi.ScalarTransform4f(obj.to_world.astype(np.float64)),
+            "bsdf": {"type": "ref", "id": obj.material}}
+
+
+class CompiledScene:
+    """A scene ready to render and differentiate. Build it with :func:`compile_scene`."""
+
+    def __init__(self, scene: Scene):
+        from abs.io.images import read_image
+
+        self.scene = scene
+        self.specs: dict[str, Parameter] = parameter_specs(scene)
+        spec = scene.environment
+        self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation)
+        self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
+        self.params = mi.traverse(self.mitsuba_scene)
+        self._rest = {}
+        for obj in scene.objects:
+            pos = np.array(self.params[f"{obj.name}.vertex_positions"]).reshape(-1, 3)
+            normals_key = f"{obj.name}.vertex_normals"
+            normals = (np.array(self.params[normals_key]).reshape(-1, 3)
+                       if normals_key in self.params and dr.width(self.params[normals_key]) else None)
+            self._rest[obj.name] = (pos, normals, pos.mean(axis=0))
+        self.values: dict[str, object] = {}
+        for name, p in self.specs.items():
+            if p.initial is not None:
+                self.values[name] = mi.Float(np.asarray(p.initial, np.float32))
+        for obj in scene.objects:
+            if np.any(obj.pose != 0):
+                self.set(f"{obj.name}.pose", mi.Float(obj.pose.astype(np.float32)))
+        for name, material in scene.materials.items():
+            for field, mspec in material.parameters().items():
+                if mspec.mitsuba_key is None:  # e.g. brdf_pca: table computed from coefficients
+                    self.set(f"{name}.{field}", self.values[f"{name}.{field}"])
+
+    # ------------------------------------------------------------- building
+    def _load(self, d: dict) -> mi.Scene:
+        try:
+            return mi.load_dict(d)
+        except RuntimeError as exc:  # Mitsuba names the file but not the scene field; add it.
+            for obj in self.scene.objects:
+                if str(obj.mesh) in str(exc) or obj.mesh.name in str(exc):
+                    raise SceneError(self.scene.source, f"objects.{obj.name}.mesh",
+                                     f"cannot load mesh {obj.mesh}: {exc}") from None
+            raise SceneError(self.scene.source, "", f"Mitsuba could not build the scene: {exc}") from None
+
+    def mitsuba_dict(self, include_environment: bool = True) -> dict:
+        """The scene as a Mitsuba dictionary (BSDFs with material names as ids, shapes with object
+        names as ids), for use with stock Mitsuba integrators and sensors."""
+        d: dict = {"type": "scene"}
+        for name, material in self.scene.materials.items():
+            d[name] = {**material.to_mitsuba(), "id": name}
+        for obj in self.scene.objects:
+            d[obj.name] = {**_mesh_dict(obj), "id": obj.name}
+        if include_environment:
+            d["environment"] = self.environment.mitsuba_dict()
+        return d
+
+    # ----------------------------------------------------------- parameters
+    def get(self, name: str) -> np.ndarray:
+        """Current value of a parameter as a float64 numpy array."""
+        self._spec(name)
+        if name in self.values:
+            return np.array(dr.detach(self.values[name]), dtype=np.float64).ravel()
+        return np.array(dr.detach(self._mitsuba_value(name)), dtype=np.float64).ravel()
+
+    def set(self, name: str, value) -> None:
+        """Write a parameter. ``value`` may be a Dr.Jit ``Float`` attached to the AD graph."""
+        spec = self._spec(name)
+        value = value if isinstance(value, mi.Float) else mi.Float(np.asarray(value, np.float32).ravel())
+        if spec.size > 0 and dr.width(value) != spec.size:
+            raise ValueError(f"{name}: expected {spec.size} values, got {dr.width(value)}")
+        self.values[name] = value
+        owner, field = spec.owner, spec.field
+        env = self.environment
+        if name == "environment.scale":
+            env.scale = value
+        elif name == "environment.rotation":
+            env.rotation = value
+        elif field == "pose":
+            self._set_pose(owner, value)
+        else:
+            material = self.scene.materials[owner]
+            mspec = material.parameters()[field]
+            if mspec.mitsuba_key is None:
+                material.apply(field, value, self.params)
+            else:
+                key = f"{owner}.{mspec.mitsuba_key}"
+                target = self.params[key]
+                if isinstance(target, mi.TensorXf):
+                    self.params[key] = mi.TensorXf(value, target.shape)
+                elif isinstance(target, mi.Float):
+                    self.params[key] = value if dr.width(target) == dr.width(value) else value[0]
+                else:
+                    self.params[key] = type(target)(*[dr.gather(mi.Float, value, i) for i in range(3)]) \
+                        if dr.width(value) == 3 else type(target)(value)
+        self.params.update()
+
+    def _mitsuba_value(self, name: str):
+        spec = self._spec(name)
+        mspec = self.scene.materials[spec.owner].parameters()[spec.field]
+        target = self.params[f"{spec.owner}.{mspec.mitsuba_key}"]
+        return target.array if isinstance(target, mi.TensorXf) else target
+
+    def _set_pose(self, obj: str, pose: mi.Float) -> None:
+        pos, normals, centre = self._rest[obj]
+        t = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3)])
+        r = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])
+        rot = rotation_matrix(r)
+        c = mi.Vector3f(*[float(x) for x in centre])
+        p = mi.Vector3f(*[mi.Float(pos[:, i].astype(np.float32)) for i in range(3)])
+        self.params[f"{obj}.vertex_positions"] = dr.ravel(rot @ (p - c) + c + t)
+        if normals is not None:
+            nrm = mi.Vector3f(*[mi.Float(normals[:, i].astype(np.float32)) for i in range(3)])
+            self.params[f"{obj}.vertex_normals"] = dr.ravel(rot @ nrm)
+
+    def _spec(self, name: str) -> Parameter:
+        if name not in self.specs:
+            raise KeyError(f"unknown parameter {name!r}; known: {', '.join(sorted(self.specs))}")
+        return self.specs[name]
+
+    def moves_geometry(self) -> bool:
+        """Whether some pose parameter is attached to the AD graph (needs reparameterisation)."""
+        return any(name.endswith(".pose") and dr.grad_enabled(v) for name, v in self.values.items())
+
+    # -------------------------------------------------------------- render
+    def render(self, camera: Camera, spp: int | None = None, seed: int = 0,
+               max_depth: int | None = None) -> mi.TensorXf:
+        """Render ``camera``'s view at the scene's ``[render]`` settings unless overridden.
+
+        Returns a ``TensorXf`` of shape ``(height, width, 3)`` (linear RGB), attached to the AD
+        graph of every parameter set with gradients enabled.
+        """
+        tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth)
+        return tracer.render(self.mitsuba_scene, self.environment, camera,
+                             spp or self.scene.render.spp, seed, reparam=self.moves_geometry())
+
+
+def compile_scene(scene: Scene) -> CompiledScene:
+    """Compile a :class:`Scene` to Mitsuba (activate a variant first, see :func:`abs.set_variant`)."""
+    return CompiledScene(scene)

@@ -1,0 +1,174 @@
+"""abs's path tracer: unidirectional path tracing with environment importance sampling and MIS,
+differentiated by plain reverse-mode AD with *attached* sampling.
+
+Why our own integrator: Mitsuba's ``prb`` family detaches sampled directions by design, so the
+gradient of an image with respect to a refractive index (which moves refracted directions) is
+lost, and C++ ``path`` drops the direction's gradient too (shared/docs/mitsuba-facts.md). Here the
+direction returned by every BSDF sample stays on the AD graph, so IOR, absorption, environment
+(scale, rotation), reflectance and pose gradients all follow from one code path. Memory grows
+with the recorded graph, so AD renders use small images or few samples per pass.
+
+Pieces:
+
+- Pixels: sample positions are drawn from a tent filter of radius 1 pixel around each pixel centre
+  and weighted by ``tent(x') / tent(x)``; the weight is 1 in value, and its derivative carries the
+  motion of the sample's image position ``x'`` under reparameterisation.
+- Colour-channel passes: glass with a different IOR per channel renders three passes, pass ``k``
+  refracting with ``ior[k]`` and contributing channel ``k`` (see :mod:`abs.render.bsdfs.dielectric`).
+- Lighting: the environment (:class:`~abs.render.environment.Environment`) is evaluated by our
+  differentiable lookup, sampled by luminance; BSDF and light samples are combined with the power
+  heuristic (detached pdfs).
+- Visibility: primary rays are reparameterised (:mod:`abs.render.reparam`) when a parameter that
+  moves geometry is differentiated; shadow-ray and secondary visibility boundaries are not
+  (their pose gradients are biased low; primary silhouettes dominate object-pose gradients).
+- Russian roulette from depth ``rr_depth`` on, with detached survival probabilities.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import drjit as dr
+import mitsuba as mi
+
+from abs.render.bsdfs.dielectric import DielectricBSDF
+from abs.render.camera import Camera
+from abs.render.environment import Environment
+from abs.render.reparam import reparameterize
+
+__all__ = ["PathTracer"]
+
+
+def _mis_power(a, b):
+    a2, b2 = dr.square(a), dr.square(b)
+    return dr.select(a2 + b2 > 0.0, a2 / (a2 + b2), 0.0)
+
+
+def _tent(x):
+    return dr.maximum(1.0 - dr.abs(x), 0.0)
+
+
+@dataclass
+class PathTracer:
+    """Render images of a Mitsuba scene lit by an :class:`Environment`.
+
+    Parameters
+    ----------
+    max_depth : int
+        Maximum number of path segments (1: environment seen directly).
+    rr_depth : int
+        Depth from which Russian roulette may end paths.
+    """
+
+    max_depth: int = 12
+    rr_depth: int = 5
+
+    # ---------------------------------------------------------------- public
+    def render(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int = 0,
+               reparam: bool = False, channels: str = "auto") -> mi.TensorXf:
+        """Render one view; returns a linear-RGB ``TensorXf`` of shape ``(height, width, 3)``.
+
+        The result stays attached to the AD graph of any parameter with gradients enabled.
+
+        Parameters
+        ----------
+        spp : int
+            Samples per pixel (per colour pass).
+        seed : int
+            Seed of the sample sequence; the same seed gives the same noise (common random numbers).
+        reparam : bool
+            Reparameterise primary rays (needed for gradients of parameters that move geometry).
+        channels : {"auto", "single", "per-channel"}
+            ``auto`` renders per-channel passes only when some glass has distinct per-channel IORs
+            or an IOR being differentiated.
+        """
+        glass = [s.bsdf() for s in scene.shapes() if isinstance(s.bsdf(), DielectricBSDF)]
+        per_channel = channels == "per-channel" or (channels == "auto" and any(
+            dr.grad_enabled(b.ior) or len({float(c[0]) for c in (b.ior.x, b.ior.y, b.ior.z)}) > 1
+            for b in glass))
+        if not per_channel:
+            for b in glass:
+                b.set_channel(0)
+            return self._render_pass(scene, env, camera, spp, seed, reparam)
+        result = None
+        for k in range(3):
+            for b in glass:
+                b.set_channel(k)
+            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, reparam)
+            mask = mi.TensorXf(dr.tile(mi.Float([1.0 if c == k else 0.0 for c in range(3)]),
+                                       camera.width * camera.height), image.shape)
+            result = image * mask if result is None else result + image * mask
+        return result
+
+    # --------------------------------------------------------------- private
+    def _render_pass(self, scene, env, camera, spp, seed, reparam) -> mi.TensorXf:
+        w, h = camera.width, camera.height
+        n = w * h * spp
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(seed, n)
+        idx = dr.arange(mi.UInt32, n)
+        pixel = idx // spp
+        px = mi.Float(pixel % w)
+        py = mi.Float(pixel // w)
+        offset = sampler.next_2d()
+        dx = mi.warp.interval_to_tent(offset.x)
+        dy = mi.warp.interval_to_tent(offset.y)
+        origin, d = camera.rays(px + dx, py + dy)
+        weight = mi.Float(1.0)
+        if reparam:
+            d_warp, det = reparameterize(scene, origin, d, sampler)
+            u, v, cos_w = camera.project_direction(d_warp)
+            _, _, cos_0 = camera.project_direction(dr.detach(d))
+            # Pixel filter at the attached image position, and the pinhole's solid-angle Jacobian.
+            weight = (_tent(u - px) * _tent(v - py)) / dr.detach(_tent(dx) * _tent(dy)) \
+                * dr.detach(dr.power(cos_0, 3)) / dr.power(cos_w, 3) * det
+            d = d_warp
+        radiance = self._trace(scene, env, mi.Ray3f(origin, d), sampler) * weight
+        # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
+        values = [dr.block_sum(c, spp) / spp for c in (radiance.x, radiance.y, radiance.z)]
+        flat = dr.zeros(mi.Float, w * h * 3)
+        lane = dr.arange(mi.UInt32, w * h)
+        for c in range(3):
+            dr.scatter(flat, values[c], lane * 3 + c)
+        return mi.TensorXf(flat, (h, w, 3))
+
+    def _trace(self, scene, env: Environment, ray: mi.Ray3f, sampler: mi.Sampler) -> mi.Color3f:
+        ctx = mi.BSDFContext()
+        result = mi.Color3f(0.0)
+        beta = mi.Color3f(1.0)
+        active = mi.Bool(True)
+        prev_pdf = mi.Float(1.0)
+        prev_delta = mi.Bool(True)
+        for depth in range(self.max_depth):
+            si = scene.ray_intersect(ray, mi.RayFlags.All, depth == 0, active)
+            escaped = active & ~si.is_valid()
+            mis = dr.select(prev_delta, 1.0, _mis_power(prev_pdf, env.pdf(ray.d, escaped)))
+            result += dr.select(escaped, beta * env.eval(ray.d, escaped) * mis, 0.0)
+            active &= si.is_valid()
+            if depth + 1 >= self.max_depth:
+                break
+            bsdf = si.bsdf(ray)
+
+            # Next-event estimation towards the environment (smooth lobes only).
+            smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            d_light, pdf_light = env.sample(sampler.next_2d(smooth), smooth)
+            visible = smooth & (pdf_light > 0.0) & ~scene.ray_test(si.spawn_ray(d_light), smooth)
+            f, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(d_light), visible)
+            contribution = beta * f * env.eval(d_light, visible) * \
+                _mis_power(pdf_light, dr.detach(pdf_bsdf)) / dr.select(visible, pdf_light, 1.0)
+            result += dr.select(visible, contribution, 0.0)
+
+            # Continue the path with an attached BSDF sample.
+            bs, weight = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
+            beta *= dr.select(active, weight, 0.0)
+            prev_pdf = dr.detach(bs.pdf)
+            prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            active &= (bs.pdf > 0.0) & (dr.max(dr.detach(beta)) > 0.0)
+
+            if depth + 1 >= self.rr_depth:
+                q = dr.minimum(dr.max(dr.detach(beta)), 0.95)
+                survive = sampler.next_1d(active) < q
+                beta = dr.select(survive, beta / dr.select(q > 0.0, q, 1.0), 0.0)
+                active &= survive
+        return result

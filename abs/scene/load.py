@@ -1,0 +1,132 @@
+"""Read a scene file (TOML) into a :class:`~abs.scene.scene.Scene`, validating every field.
+
+Scene files are data: they are parsed with :mod:`tomllib`, never evaluated.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+from abs.errors import SceneError
+from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
+from abs.scene.fields import Fields
+from abs.scene.materials.base import material_class, material_types
+from abs.scene.scene import EnvironmentSpec, ObjectSpec, RenderSettings, Scene
+
+__all__ = ["load_scene"]
+
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*$")
+_MESH_SUFFIXES = (".ply", ".obj")
+_IMAGE_SUFFIXES = (".exr", ".hdr", ".png", ".jpg", ".jpeg")
+
+
+def _check_name(fields: Fields, key: str, name: str, what: str) -> None:
+    if not _NAME.match(name):
+        raise fields.error(key, f"{what} name {name!r} must start with a letter or '_' and contain "
+                                "only letters, digits, '_' and '-'")
+    if name in ("environment",):
+        raise fields.error(key, f"{what} name {name!r} is reserved")
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A TOML scene file (format: ``docs/scene-format.md``).
+
+    Raises
+    ------
+    SceneError
+        Naming the file and the field, for any malformed or missing value or asset.
+    """
+    source = Path(path).resolve()
+    if not source.is_file():
+        raise SceneError(source, "", "scene file not found")
+    try:
+        data = tomllib.loads(source.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SceneError(source, "", f"not valid TOML: {exc}") from None
+    root = Fields(data, source, "")
+    root.check_known({"render", "environment", "materials", "objects", "fit"})
+
+    render_fields = root.sub("render", required=False) or Fields({}, source, "render")
+    render_fields.check_known({"spp", "max_depth"})
+    render = RenderSettings(
+        spp=render_fields.number("spp", 64, lower=1, integer=True),
+        max_depth=render_fields.number("max_depth", 12, lower=1, upper=1000, integer=True),
+    )
+
+    env_fields = root.sub("environment")
+    env_fields.check_known({"file", "scale", "to_world", "rotation"})
+    environment = EnvironmentSpec(
+        file=env_fields.file("file", suffixes=_IMAGE_SUFFIXES),
+        scale=env_fields.number("scale", 1.0, lower=0.0),
+        to_world=env_fields.transform("to_world"),
+        rotation=env_fields.number("rotation", 0.0),
+    )
+
+    mat_fields = root.sub("materials")
+    materials = {}
+    for name in mat_fields.table:
+        _check_name(mat_fields, name, name, "material")
+        fields = mat_fields.sub(name)
+        type_name = fields.string("type")
+        cls = material_class(type_name)
+        if cls is None:
+            raise fields.error("type", f"unknown material type {type_name!r}; known types: "
+                                       f"{', '.join(material_types())}")
+        materials[name] = cls.from_fields(name, fields)
+    if not materials:
+        raise mat_fields.error("", "no materials defined")
+
+    raw_objects = root.raw("objects")
+    if not isinstance(raw_objects, list) or not raw_objects:
+        raise root.error("objects", "expected at least one [[objects]] table")
+    objects = []
+    for i, raw in enumerate(raw_objects):
+        if not isinstance(raw, dict):
+            raise root.error(f"objects[{i}]", "expected a table")
+        fields = Fields(raw, source, f"objects[{i}]")
+        fields.check_known({"name", "mesh", "material", "to_world", "pose"})
+        name = fields.string("name")
+        _check_name(fields, "name", name, "object")
+        if name in materials:
+            raise fields.error("name", f"object name {name!r} is also a material name; parameter "
+                                       "names would be ambiguous")
+        if any(o.name == name for o in objects):
+            raise fields.error("name", f"duplicate object name {name!r}")
+        material = fields.string("material")
+        if material not in materials:
+            raise fields.error("material", f"unknown material {material!r}; defined: "
+                                           f"{', '.join(sorted(materials))}")
+        objects.append(ObjectSpec(
+            name=name,
+            mesh=fields.file("mesh", suffixes=_MESH_SUFFIXES),
+            material=material,
+            to_world=fields.transform("to_world"),
+            pose=fields.array("pose", (6,), default=[0.0] * 6),
+        ))
+
+    fit_parameters: tuple[str, ...] = ()
+    fit_fields = root.sub("fit", required=False)
+    if fit_fields is not None:
+        fit_fields.check_known({"parameters"})
+        names = fit_fields.raw("parameters", [])
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise fit_fields.error("parameters", f"expected a list of parameter names, got {names!r}")
+        fit_parameters = tuple(names)
+
+    scene = Scene(source, render, environment, materials, tuple(objects), fit_parameters)
+    # Validate parameter names now, so a typo fails at load time rather than mid-fit.
+    from abs.params.names import parameter_specs
+
+    known = parameter_specs(scene)
+    for i, name in enumerate(fit_parameters):
+        if name not in known:
+            raise SceneError(source, f"fit.parameters[{i}]",
+                             f"unknown parameter {name!r}; known: {', '.join(sorted(known))}")
+    return scene

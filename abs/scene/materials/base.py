@@ -1,0 +1,110 @@
+"""The material plugin interface and its registry.
+
+A material type is one file in this folder defining a subclass of :class:`Material` decorated with
+:func:`register`. The scene loader dispatches on the TOML ``type`` field through the registry, so
+adding a material type never touches the loader.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from abs.scene.fields import Fields
+
+__all__ = ["Material", "ParameterSpec", "register", "material_types", "material_class"]
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """A differentiable field of a material.
+
+    Parameters
+    ----------
+    field : str
+        Name of the field in the scene file (``ior``, ``absorption``, ...).
+    size : int
+        Number of scalars (3 for per-channel quantities).
+    unit : str
+        Physical unit (``"1/m"``, ``"1"`` for dimensionless).
+    lower, upper : float
+        Physical bounds, inclusive.
+    mitsuba_key : str or None
+        Suffix of the Mitsuba parameter key below the material's id (``"ior"`` -> ``glass.ior``).
+        ``None`` when the material computes the Mitsuba value itself (see :meth:`Material.apply`).
+    """
+
+    field: str
+    size: int
+    unit: str
+    lower: float
+    upper: float
+    mitsuba_key: str | None
+
+
+class Material(ABC):
+    """A named material of a scene.
+
+    Subclasses are immutable descriptions parsed from the scene file; :meth:`to_mitsuba` turns
+    them into a Mitsuba BSDF dictionary.
+    """
+
+    type_name: ClassVar[str]
+
+    def __init__(self, name: str):
+        self.name = name
+
+    @classmethod
+    @abstractmethod
+    def from_fields(cls, name: str, fields: Fields) -> "Material":
+        """Parse the material's TOML table (``fields.table`` includes ``type``)."""
+
+    @abstractmethod
+    def to_mitsuba(self) -> dict:
+        """The Mitsuba BSDF dictionary for this material."""
+
+    def to_toml(self) -> dict:
+        """The TOML table that reproduces this material (for writing fitted scenes)."""
+        return dict(self._toml)
+
+    def parameters(self) -> dict[str, ParameterSpec]:
+        """Differentiable fields, keyed by field name."""
+        return {}
+
+    def value(self, field: str) -> np.ndarray:
+        """Current value of a differentiable field as given in the scene file."""
+        return np.atleast_1d(np.asarray(self._toml[field], dtype=np.float64))
+
+    def apply(self, field: str, value, mitsuba_params) -> None:
+        """Write a field whose ``mitsuba_key`` is ``None`` into the Mitsuba parameters.
+
+        ``value`` is a Dr.Jit array (possibly attached to the AD graph).
+        """
+        raise NotImplementedError(f"{type(self).__name__}.{field} has no custom binding")
+
+    _toml: dict
+
+
+_REGISTRY: dict[str, type[Material]] = {}
+
+
+def register(cls: type[Material]) -> type[Material]:
+    """Class decorator: make a material type available under ``cls.type_name``."""
+    if cls.type_name in _REGISTRY and _REGISTRY[cls.type_name] is not cls:
+        raise ValueError(f"material type {cls.type_name!r} registered twice")
+    _REGISTRY[cls.type_name] = cls
+    return cls
+
+
+def material_types() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def material_class(type_name: str) -> type[Material] | None:
+    return _REGISTRY.get(type_name)
+
+
+ParameterSetter = Callable[[object, object], None]

@@ -1,0 +1,31 @@
+"""``dielectric``: smooth glass with per-channel IOR and Beer-Lambert absorption (1/m)."""
+
+from __future__ import annotations
+
+from abs.scene.fields import Fields
+from abs.scene.materials.base import Material, ParameterSpec, register
+
+
+@register
+class Dielectric(Material):
+    type_name = "dielectric"
+
+    @classmethod
+    def from_fields(cls, name: str, fields: Fields) -> "Dielectric":
+        fields.check_known({"type", "ior", "absorption"})
+        self = cls(name)
+        self.ior_rgb = fields.rgb("ior", 1.5, lower=1.0, upper=3.0)
+        self.absorption_per_m = fields.rgb("absorption", 0.0, lower=0.0)
+        self._toml = {"type": cls.type_name, "ior": self.ior_rgb.tolist(),
+                      "absorption": self.absorption_per_m.tolist()}
+        return self
+
+    def to_mitsuba(self) -> dict:
+        return {"type": "abs_dielectric", "ior": self.ior_rgb.tolist(),
+                "absorption": self.absorption_per_m.tolist()}
+
+    def parameters(self) -> dict[str, ParameterSpec]:
+        return {
+            "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior"),
+            "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption"),
+        }

@@ -1,0 +1,50 @@
+"""``diffuse``: Lambertian reflectance, a constant RGB albedo or a texture image.
+
+Texture PNGs are read as sRGB-encoded and decoded to linear RGB; EXR textures are linear.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from abs.scene.fields import Fields
+from abs.scene.materials.base import Material, ParameterSpec, register
+
+_TEXTURES = (".png", ".jpg", ".jpeg", ".exr")
+
+
+def reflectance_texture(fields: Fields, key: str, default) -> tuple[np.ndarray | None, object]:
+    """Read an RGB reflectance that may be a texture path. Returns ``(rgb or None, path or None)``."""
+    if isinstance(fields.raw(key, default), str):
+        return None, fields.file(key, suffixes=_TEXTURES)
+    return fields.rgb(key, default, lower=0.0, upper=1.0), None
+
+
+def texture_dict(path) -> dict:
+    # Mitsuba decodes 8-bit PNG/JPEG as sRGB and treats EXR as linear, as our convention says.
+    return {"type": "bitmap", "filename": str(path), "raw": False, "filter_type": "bilinear"}
+
+
+@register
+class Diffuse(Material):
+    type_name = "diffuse"
+
+    @classmethod
+    def from_fields(cls, name: str, fields: Fields) -> "Diffuse":
+        fields.check_known({"type", "reflectance"})
+        self = cls(name)
+        self.reflectance_rgb, self.texture = reflectance_texture(fields, "reflectance", 0.5)
+        value = str(fields.raw("reflectance")) if self.texture is not None else self.reflectance_rgb.tolist()
+        self._toml = {"type": cls.type_name, "reflectance": value}
+        return self
+
+    def to_mitsuba(self) -> dict:
+        if self.texture is not None:
+            return {"type": "diffuse", "reflectance": texture_dict(self.texture)}
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": self.reflectance_rgb.tolist()}}
+
+    def parameters(self) -> dict[str, ParameterSpec]:
+        if self.texture is not None:
+            # The whole texture (H x W x 3 values) is the parameter; its size is known once loaded.
+            return {"reflectance": ParameterSpec("reflectance", -1, "1", 0.0, 1.0, "reflectance.data")}
+        return {"reflectance": ParameterSpec("reflectance", 3, "1", 0.0, 1.0, "reflectance.value")}

@@ -1,0 +1,79 @@
+"""The scene representation: what a scene file says, as immutable Python objects.
+
+A :class:`Scene` is pure data (no Mitsuba objects); :func:`abs.render.compile_scene` turns it into
+a differentiable Mitsuba scene. See ``docs/scene-format.md`` for the file format.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from abs.scene.materials.base import Material
+
+__all__ = ["RenderSettings", "EnvironmentSpec", "ObjectSpec", "Scene"]
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """``[render]``: samples per pixel and maximum path length (segments)."""
+
+    spp: int = 64
+    max_depth: int = 12
+
+
+@dataclass(frozen=True)
+class EnvironmentSpec:
+    """``[environment]``: a lat-long HDR map at infinity.
+
+    ``rotation`` (radians, about world +y) is applied after ``to_world``.
+    """
+
+    file: Path
+    scale: float = 1.0
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    rotation: float = 0.0
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """``[[objects]]``: a mesh with a material; ``pose`` is a correction on top of ``to_world``
+    (see docs/conventions.md)."""
+
+    name: str
+    mesh: Path
+    material: str
+    to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
+    pose: np.ndarray = field(default_factory=lambda: np.zeros(6))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A whole scene file.
+
+    Attributes
+    ----------
+    source : Path
+        The file it was read from (assets are resolved relative to it).
+    fit_parameters : tuple of str
+        Names from ``[fit] parameters`` (fitted by default).
+    """
+
+    source: Path
+    render: RenderSettings
+    environment: EnvironmentSpec
+    materials: dict[str, Material]
+    objects: tuple[ObjectSpec, ...]
+    fit_parameters: tuple[str, ...] = ()
+
+    def object(self, name: str) -> ObjectSpec:
+        for obj in self.objects:
+            if obj.name == name:
+                return obj
+        raise KeyError(name)
+
+    def with_render(self, **changes) -> "Scene":
+        """A copy with some ``[render]`` settings changed (e.g. ``spp=4`` for tests)."""
+        return replace(self, render=replace(self.render, **changes))

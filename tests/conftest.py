@@ -1,0 +1,102 @@
+"""Shared fixtures: a variant for every test and small synthetic scenes built on the fly."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from abs.render.variant import set_variant
+
+set_variant()
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def write_mesh(path: Path, mesh) -> None:
+    import trimesh
+
+    mesh.export(path)
+    assert isinstance(mesh, trimesh.Trimesh)
+
+
+def make_env(path: Path, width: int = 64, height: int = 32) -> None:
+    """A dim enclosure with one bright band and a coloured patch (so rotation has a gradient)."""
+    from abs.io.images import write_exr
+
+    v, u = np.mgrid[0:height, 0:width]
+    env = np.full((height, width, 3), 0.05, np.float32)
+    env[(v > height * 0.15) & (v < height * 0.3)] = [4.0, 4.0, 3.6]
+    env[(u > width * 0.6) & (u < width * 0.75) & (v < height * 0.6)] += np.float32([1.5, 0.3, 0.2])
+    env[v > height * 0.6] = [0.3, 0.3, 0.3]
+    write_exr(path, env)
+
+
+def make_checker(path: Path, n: int = 64) -> None:
+    import cv2
+
+    v, u = np.mgrid[0:n, 0:n]
+    img = np.where(((u // 8) + (v // 8)) % 2 == 0, 230, 120).astype(np.uint8)
+    cv2.imwrite(str(path), np.dstack([img] * 3))
+
+
+@pytest.fixture(scope="session")
+def small_scene_dir(tmp_path_factory) -> Path:
+    """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""
+    import trimesh
+
+    root = tmp_path_factory.mktemp("small_scene")
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    sphere.apply_translation([0, 0.05, 0])
+    write_mesh(root / "sphere.ply", sphere)
+    floor = trimesh.Trimesh(vertices=[[-0.3, 0, -0.3], [0.3, 0, -0.3], [0.3, 0, 0.3], [-0.3, 0, 0.3]],
+                            faces=[[0, 2, 1], [0, 3, 2]], process=False)
+    write_mesh(root / "floor.ply", floor)
+    back = trimesh.Trimesh(vertices=[[-0.3, 0, -0.12], [0.3, 0, -0.12], [0.3, 0.3, -0.12], [-0.3, 0.3, -0.12]],
+                           faces=[[0, 1, 2], [0, 2, 3]], process=False)
+    back.visual = trimesh.visual.TextureVisuals(uv=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float))
+    write_mesh(root / "backdrop.obj", back)
+    make_env(root / "env.exr")
+    make_checker(root / "checker.png")
+    (root / "scene.toml").write_text("""
+[render]
+spp = 16
+max_depth = 8
+
+[environment]
+file = "env.exr"
+scale = 1.0
+
+[materials.glass]
+type = "dielectric"
+ior = [1.5, 1.5, 1.5]
+absorption = [2.0, 4.0, 8.0]
+
+[materials.cloth]
+type = "diffuse"
+reflectance = [0.7, 0.7, 0.65]
+
+[materials.backdrop]
+type = "diffuse"
+reflectance = "checker.png"
+
+[[objects]]
+name = "sphere"
+mesh = "sphere.ply"
+material = "glass"
+
+[[objects]]
+name = "floor"
+mesh = "floor.ply"
+material = "cloth"
+
+[[objects]]
+name = "board"
+mesh = "backdrop.obj"
+material = "backdrop"
+
+[fit]
+parameters = ["glass.absorption"]
+""")
+    return root
