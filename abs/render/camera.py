@@ -14,6 +14,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from abs.render.jit import opaque
+
 __all__ = ["Camera"]
 
 
@@ -51,16 +53,16 @@ class Camera:
         return -self.R.T @ self.t
 
     def _mats(self):
+        # Opaque: a new camera must not bake new literals into (and recompile) the kernels.
         kinv = np.linalg.inv(self.K)
-        return (mi.Matrix3f(kinv.astype(np.float32)), mi.Matrix3f(self.R.T.astype(np.float32)),
-                mi.Matrix3f(self.K.astype(np.float32)), mi.Matrix3f(self.R.astype(np.float32)))
+        return tuple(opaque(mi.Matrix3f, m) for m in (kinv, self.R.T, self.K, self.R))
 
     def rays(self, u: mi.Float, v: mi.Float) -> tuple[mi.Point3f, mi.Vector3f]:
         """World-space unit rays through continuous pixel positions ``(u, v)``."""
         kinv, rt, _, _ = self._mats()
         d_cam = kinv @ mi.Vector3f(u, v, 1.0)
         d = dr.normalize(rt @ d_cam)
-        return mi.Point3f(*[float(x) for x in self.center]), d
+        return opaque(mi.Point3f, *self.center.tolist()), d
 
     def project_direction(self, d: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
         """Pixel position of world direction ``d`` from the centre, and the cosine between ``d``

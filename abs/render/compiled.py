@@ -24,9 +24,12 @@ from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plug
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
+from abs.render.jit import opaque
 from abs.scene.scene import Scene
 
 __all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
+
+MAX_SAMPLES_IN_FLIGHT = 1 << 22
 
 
 def rotation_matrix(r) -> mi.Matrix3f:
@@ -70,7 +73,7 @@ class CompiledScene:
         self.values: dict[str, object] = {}
         for name, p in self.specs.items():
             if p.initial is not None:
-                self.values[name] = mi.Float(np.asarray(p.initial, np.float32))
+                self.values[name] = opaque(mi.Float, np.asarray(p.initial, np.float32))
         for obj in scene.objects:
             if np.any(obj.pose != 0):
                 self.set(f"{obj.name}.pose", mi.Float(obj.pose.astype(np.float32)))
@@ -113,7 +116,8 @@ class CompiledScene:
     def set(self, name: str, value) -> None:
         """Write a parameter. ``value`` may be a Dr.Jit ``Float`` attached to the AD graph."""
         spec = self._spec(name)
-        value = value if isinstance(value, mi.Float) else mi.Float(np.asarray(value, np.float32).ravel())
+        if not isinstance(value, mi.Float):
+            value = opaque(mi.Float, np.asarray(value, np.float32).ravel())
         if spec.size > 0 and dr.width(value) != spec.size:
             raise ValueError(f"{name}: expected {spec.size} values, got {dr.width(value)}")
         self.values[name] = value
@@ -178,8 +182,19 @@ class CompiledScene:
         graph of every parameter set with gradients enabled.
         """
         tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth)
-        return tracer.render(self.mitsuba_scene, self.environment, camera,
-                             spp or self.scene.render.spp, seed, reparam=self.moves_geometry())
+        spp = spp or self.scene.render.spp
+        # Bound the wavefront (samples in flight) so large primal renders fit in memory; each
+        # batch gets its own seed and the batches are averaged.
+        per_batch = max(1, min(spp, MAX_SAMPLES_IN_FLIGHT // (camera.width * camera.height)))
+        batches = [per_batch] * (spp // per_batch) + ([spp % per_batch] if spp % per_batch else [])
+        image = None
+        for i, n in enumerate(batches):
+            part = tracer.render(self.mitsuba_scene, self.environment, camera, n,
+                                 seed * 7919 + i if len(batches) > 1 else seed,
+                                 reparam=self.moves_geometry()) * (n / spp)
+            image = part if image is None else image + part
+            dr.eval(image)
+        return image
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

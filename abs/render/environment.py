@@ -49,8 +49,9 @@ class Environment:
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
         self.data = mi.TensorXf(rgb)
-        self.scale = mi.Float(scale)
-        self.rotation = mi.Float(rotation)
+        # Opaque so that new values (every fit iteration) do not recompile kernels.
+        self.scale = dr.opaque(mi.Float, scale)
+        self.rotation = dr.opaque(mi.Float, rotation)
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m
         self._base = mi.Matrix3f(m[:3, :3].astype(np.float32))

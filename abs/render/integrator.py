@@ -17,7 +17,9 @@ Pieces:
   refracting with ``ior[k]`` and contributing channel ``k`` (see :mod:`abs.render.bsdfs.dielectric`).
 - Lighting: the environment (:class:`~abs.render.environment.Environment`) is evaluated by our
   differentiable lookup, sampled by luminance; BSDF and light samples are combined with the power
-  heuristic (detached pdfs).
+  heuristic. The weights stay *attached*: BSDF samples are differentiated in primary-sample
+  space and light samples in direction space, and only attached weights keep summing to one
+  under differentiation (detached weights bias gradients whenever a shading frame moves).
 - Visibility: primary rays are reparameterised (:mod:`abs.render.reparam`) when a parameter that
   moves geometry is differentiated; shadow-ray and secondary visibility boundaries are not
   (their pose gradients are biased low; primary silhouettes dominate object-pose gradients).
@@ -87,21 +89,17 @@ class PathTracer:
             dr.grad_enabled(b.ior) or len({float(c[0]) for c in (b.ior.x, b.ior.y, b.ior.z)}) > 1
             for b in glass))
         if not per_channel:
-            for b in glass:
-                b.set_channel(0)
-            return self._render_pass(scene, env, camera, spp, seed, reparam)
+            return self._render_pass(scene, env, camera, spp, seed, reparam, channel=0)
         result = None
         for k in range(3):
-            for b in glass:
-                b.set_channel(k)
-            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, reparam)
+            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, reparam, channel=k)
             mask = mi.TensorXf(dr.tile(mi.Float([1.0 if c == k else 0.0 for c in range(3)]),
                                        camera.width * camera.height), image.shape)
             result = image * mask if result is None else result + image * mask
         return result
 
     # --------------------------------------------------------------- private
-    def _render_pass(self, scene, env, camera, spp, seed, reparam) -> mi.TensorXf:
+    def _render_pass(self, scene, env, camera, spp, seed, reparam, channel) -> mi.TensorXf:
         w, h = camera.width, camera.height
         n = w * h * spp
         sampler = mi.load_dict({"type": "independent"})
@@ -123,7 +121,9 @@ class PathTracer:
             weight = (_tent(u - px) * _tent(v - py)) / dr.detach(_tent(dx) * _tent(dy)) \
                 * dr.detach(dr.power(cos_0, 3)) / dr.power(cos_w, 3) * det
             d = d_warp
-        radiance = self._trace(scene, env, mi.Ray3f(origin, d), sampler) * weight
+        # The ray time carries the colour channel of this pass to abs_dielectric (see there).
+        ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
+        radiance = self._trace(scene, env, ray, sampler) * weight
         # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
         values = [dr.block_sum(c, spp) / spp for c in (radiance.x, radiance.y, radiance.z)]
         flat = dr.zeros(mi.Float, w * h * 3)
@@ -155,13 +155,13 @@ class PathTracer:
             visible = smooth & (pdf_light > 0.0) & ~scene.ray_test(si.spawn_ray(d_light), smooth)
             f, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(d_light), visible)
             contribution = beta * f * env.eval(d_light, visible) * \
-                _mis_power(pdf_light, dr.detach(pdf_bsdf)) / dr.select(visible, pdf_light, 1.0)
+                _mis_power(pdf_light, pdf_bsdf) / dr.select(visible, pdf_light, 1.0)
             result += dr.select(visible, contribution, 0.0)
 
             # Continue the path with an attached BSDF sample.
             bs, weight = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
             beta *= dr.select(active, weight, 0.0)
-            prev_pdf = dr.detach(bs.pdf)
+            prev_pdf = bs.pdf
             prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
             ray = si.spawn_ray(si.to_world(bs.wo))
             active &= (bs.pdf > 0.0) & (dr.max(dr.detach(beta)) > 0.0)

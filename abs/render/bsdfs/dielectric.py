@@ -6,8 +6,9 @@ Why not Mitsuba's ``dielectric``: its ``eta`` is a single, non-differentiable fl
 Dispersion. With a different IOR per channel, one light path cannot refract into three directions,
 so the integrator renders in *channel passes* (see :mod:`abs.render.integrator`): in pass ``k``
 this BSDF refracts with ``ior[k]`` and the integrator keeps channel ``k`` of the result. The
-active channel is the opaque member :attr:`DielectricBSDF.channel`, so switching passes does not
-recompile kernels. Choosing between reflection and refraction uses the active channel's Fresnel
+active channel arrives as per-lane data in ``si.time`` (abs scenes are static, so the time
+coordinate is free): state on the Python object would be wrong, because Dr.Jit re-traces this
+method during the backward pass, after the last pass has changed any such state. Choosing between reflection and refraction uses the active channel's Fresnel
 reflectance, with the probability detached so the weight ``F / detach(F)`` carries the IOR
 gradient.
 
@@ -29,7 +30,7 @@ PLUGIN = "abs_dielectric"
 
 
 def _vec3(props, key: str, default: float) -> list[float]:
-    if not props.has_property(key):
+    if key not in props:
         return [default] * 3
     value = props.get(key)
     try:
@@ -46,23 +47,20 @@ class DielectricBSDF(mi.BSDF):
         mi.BSDF.__init__(self, props)
         self.ior = mi.Color3f(_vec3(props, "ior", 1.5))
         self.absorption = mi.Color3f(_vec3(props, "absorption", 0.0))
-        self.channel = dr.opaque(mi.UInt32, 0)
         reflection = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
         transmission = (mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.FrontSide
                         | mi.BSDFFlags.BackSide | mi.BSDFFlags.NonSymmetric)
         self.m_components = [reflection, transmission]
         self.m_flags = reflection | transmission
 
-    def set_channel(self, channel: int) -> None:
-        """Select the colour channel (0, 1, 2) whose IOR refracts in the next render pass."""
-        self.channel = dr.opaque(mi.UInt32, int(channel))
-
-    def _channel_value(self, rgb: mi.Color3f) -> mi.Float:
-        return dr.select(self.channel == 0, rgb.x, dr.select(self.channel == 1, rgb.y, rgb.z))
+    @staticmethod
+    def _channel_value(rgb: mi.Color3f, si) -> mi.Float:
+        channel = mi.UInt32(dr.clip(si.time, 0.0, 2.0))
+        return dr.select(channel == 0, rgb.x, dr.select(channel == 1, rgb.y, rgb.z))
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         cos_theta_i = mi.Frame3f.cos_theta(si.wi)
-        eta = self._channel_value(self.ior)
+        eta = self._channel_value(self.ior, si)
         # Fresnel reflectance of every channel at this angle; mi.fresnel handles the inside case.
         f_r = mi.Color3f(mi.fresnel(cos_theta_i, self.ior.x)[0], mi.fresnel(cos_theta_i, self.ior.y)[0],
                          mi.fresnel(cos_theta_i, self.ior.z)[0])

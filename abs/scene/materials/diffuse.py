@@ -21,8 +21,14 @@ def reflectance_texture(fields: Fields, key: str, default) -> tuple[np.ndarray |
 
 
 def texture_dict(path) -> dict:
-    # Mitsuba decodes 8-bit PNG/JPEG as sRGB and treats EXR as linear, as our convention says.
-    return {"type": "bitmap", "filename": str(path), "raw": False, "filter_type": "bilinear"}
+    """A differentiable Mitsuba texture: decoded here to linear float RGB, because Mitsuba keeps
+    8-bit images as ``uint8`` tensors, which cannot carry gradients."""
+    import mitsuba as mi
+
+    from abs.io.images import read_image
+
+    return {"type": "bitmap", "bitmap": mi.Bitmap(read_image(path)), "raw": True,
+            "filter_type": "bilinear"}
 
 
 @register

@@ -1,0 +1,42 @@
+"""``abs`` command line: one sub-command per module in this package.
+
+User-input errors (:class:`abs.errors.InputError`) are printed as one line naming the file and
+field, with exit status 2; anything else is a bug and shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from abs.errors import InputError
+
+__all__ = ["main"]
+
+
+def _parser() -> argparse.ArgumentParser:
+    from abs.cli import render, simulate
+
+    parser = argparse.ArgumentParser(prog="abs", description="Differentiable analysis by synthesis.")
+    parser.add_argument("--variant", help="Mitsuba variant (default: $ABS_VARIANT, else CUDA if "
+                                          "usable, else llvm_ad_rgb)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for module in (render, simulate):
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        from abs.render.variant import set_variant
+
+        set_variant(args.variant)
+        return int(args.run(args) or 0)
+    except InputError as exc:
+        print(f"abs {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

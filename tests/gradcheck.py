@@ -1,0 +1,51 @@
+"""AD-versus-finite-difference checks with Monte Carlo error bars.
+
+Both estimates are noisy: the AD gradient is itself a Monte Carlo estimate, and a central finite
+difference with common random numbers still jumps where a discrete sampling decision (reflect or
+refract, Russian roulette) flips. So each is averaged over several seeds and the two must agree
+within their combined standard error (plus a small relative slack), and the FD estimate must be
+clearly nonzero so that the check cannot pass vacuously.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from abs.render.integrator import PathTracer
+
+
+def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4, spp=64,
+                         max_depth=4, reparam=None):
+    """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``)."""
+    x0 = compiled.get(name)
+    direction = np.asarray(direction, float)
+    tracer = PathTracer(max_depth=max_depth, rr_depth=1000)
+
+    def loss(x, seed, grad):
+        value = mi.Float(np.asarray(x, np.float32))
+        if grad:
+            dr.enable_grad(value)
+        compiled.set(name, value)
+        rp = compiled.moves_geometry() if reparam is None else (reparam and grad)
+        image = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, spp, seed,
+                              reparam=rp)
+        total = dr.sum(image * weights, axis=None)
+        if grad:
+            dr.backward(total)
+            return float(np.dot(np.array(dr.grad(value)), direction))
+        return float(np.array(total).ravel()[0])
+
+    ad = [loss(x0, s, True) for s in range(seeds)]
+    fd = [(loss(x0 + h * direction, s, False) - loss(x0 - h * direction, s, False)) / (2 * h)
+          for s in range(seeds)]
+    compiled.set(name, x0)
+    se = lambda v: float(np.std(v, ddof=1) / np.sqrt(len(v)))  # noqa: E731
+    return float(np.mean(ad)), se(ad), float(np.mean(fd)), se(fd)
+
+
+def assert_gradients_agree(ad, ad_se, fd, fd_se, rel=0.05, sigmas=4.0):
+    assert abs(fd) > sigmas * fd_se, f"FD {fd:.4g} +- {fd_se:.3g} is not clearly nonzero"
+    tol = sigmas * np.hypot(ad_se, fd_se) + rel * abs(fd)
+    assert abs(ad - fd) <= tol, f"AD {ad:.5g} +- {ad_se:.3g} vs FD {fd:.5g} +- {fd_se:.3g} (tol {tol:.3g})"
