@@ -30,7 +30,7 @@ def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: fl
     """Cameras on an arc in front of the scene (+z side, +y up), looking at its solid objects.
 
     The target is the centre of the bounding box of all non-flat objects (e.g. the glass on the
-    table, not the table or backdrop); the distance makes that box span about a third of the
+    table, not the table or backdrop); the distance makes that box span about half of the
     vertical field of view.
 
     Returns
@@ -44,7 +44,7 @@ def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: fl
     hi = np.max([b[1] for b in solid], axis=0)
     target = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-    distance = radius / np.tan(np.radians(fov_deg) / 6)
+    distance = radius / np.tan(np.radians(fov_deg) / 4)
     K = intrinsics_from_fov(width, height, np.radians(fov_deg))
     azimuths = np.linspace(*azimuth_range_deg, n_cameras) if n_cameras > 1 else [0.0]
     elev = np.radians(elevation_deg)

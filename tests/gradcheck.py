@@ -33,7 +33,7 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
                               reparam=rp)
         total = dr.sum(image * weights, axis=None)
         if grad:
-            dr.backward(total)
+            dr.backward(total, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
             return float(np.dot(np.array(dr.grad(value)), direction))
         return float(np.array(total).ravel()[0])
 

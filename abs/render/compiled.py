@@ -85,7 +85,9 @@ class CompiledScene:
     # ------------------------------------------------------------- building
     def _load(self, d: dict) -> mi.Scene:
         try:
-            return mi.load_dict(d)
+            # optimize=False: Mitsuba would otherwise merge meshes that share a BSDF into one
+            # shape, and each object must stay its own shape for its pose parameter.
+            return mi.load_dict(d, optimize=False)
         except RuntimeError as exc:  # Mitsuba names the file but not the scene field; add it.
             for obj in self.scene.objects:
                 if str(obj.mesh) in str(exc) or obj.mesh.name in str(exc):

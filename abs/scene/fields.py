@@ -92,7 +92,10 @@ class Fields:
 
     def array(self, key: str, shape: tuple[int, ...], default: Any = _MISSING,
               lower: float | None = None, upper: float | None = None) -> np.ndarray:
-        value = self.raw(key, default)
+        return self._array(key, self.raw(key, default), shape, lower, upper)
+
+    def _array(self, key: str, value: Any, shape: tuple[int, ...], lower: float | None,
+               upper: float | None) -> np.ndarray:
         try:
             arr = np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):
@@ -113,7 +116,7 @@ class Fields:
         value = self.raw(key, default)
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             value = [value] * 3
-        return self.array(key, (3,), value, lower, upper)
+        return self._array(key, value, (3,), lower, upper)
 
     def file(self, key: str, default: Any = _MISSING, suffixes: tuple[str, ...] = ()) -> Path:
         """A path relative to the scene file that must exist."""
