@@ -1,0 +1,12 @@
+"""abs: differentiable analysis by synthesis.
+
+One scene representation (:mod:`abs.scene`), compiled to Mitsuba 3's differentiable renderer
+(:mod:`abs.render`), fed by calibrated captures (:mod:`abs.io`). Importing ``abs`` does not start
+Mitsuba; importing :mod:`abs.render` activates a variant (see :func:`abs.render.variant.set_variant`).
+"""
+
+from abs.errors import CaptureError, DeviceError, InputError, SceneError
+from abs.scene import load_scene
+
+__version__ = "0.1.0"
+__all__ = ["load_scene", "InputError", "SceneError", "CaptureError", "DeviceError", "__version__"]
