@@ -58,8 +58,9 @@ def _matrix(value: Any, shape: tuple[int, ...], source: Path | None, field: str)
     except (TypeError, ValueError):
         arr = None
     if arr is None or arr.shape != shape or isinstance(value, (str, bytes)):
-        what = "x".join(map(str, shape))
-        raise CaptureError(source, field, f"expected a {what} array of numbers, got {value!r}")
+        what = (f"{shape[0]} numbers" if len(shape) == 1
+                else f"a {shape[0]}x{shape[1]} array of numbers")
+        raise CaptureError(source, field, f"expected {what}, got {value!r}")
     if not np.all(np.isfinite(arr)):
         raise CaptureError(source, field, f"values must be finite, got {arr.tolist()}")
     return arr
@@ -76,7 +77,8 @@ def _check_K(value: Any, source: Path | None, field: str) -> np.ndarray:
     K = _matrix(value, (3, 3), source, field)
     if K[0, 0] <= 0 or K[1, 1] <= 0:
         raise CaptureError(source, field, f"focal lengths fx = K[0][0] and fy = K[1][1] must be "
-                                          f"> 0 pixels, got fx = {K[0, 0]}, fy = {K[1, 1]}")
+                                          f"> 0 pixels, got fx = {K[0, 0]}, fy = {K[1, 1]}"
+                                          f"{' (K is singular)' if K[0, 0] * K[1, 1] == 0 else ''}")
     if K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
         raise CaptureError(source, field, "expected the form [[fx, s, cx], [0, fy, cy], "
                                           f"[0, 0, 1]], got {K.tolist()}")
@@ -236,7 +238,8 @@ def _resolve(folder: Path, value: Any, source: Path, field: str) -> Path:
     return path if path.is_absolute() else (folder / path)
 
 
-def _image_size(path: Path, source: Path, field: str, extensions: tuple[str, ...]) -> tuple[int, int]:
+def _image_size(path: Path, source: Path, field: str,
+                extensions: tuple[str, ...]) -> tuple[int, int]:
     """Header size of a referenced image; file problems become errors on ``field``."""
     if not path.is_file():
         raise CaptureError(source, field, f"file not found: {path}")
@@ -347,12 +350,17 @@ def _json_view(view: View, folder: Path) -> str:
         except ValueError:
             return str(path)
 
-    rows = lambda m: "[" + ", ".join(json.dumps([float(x) for x in r]) for r in m) + "]"  # noqa: E731
+    def numbers(values: np.ndarray) -> str:
+        return json.dumps([float(x) + 0.0 for x in values])  # + 0.0 turns -0.0 into 0.0
+
+    def rows(matrix: np.ndarray) -> str:
+        return "[" + ", ".join(numbers(r) for r in matrix) + "]"
+
     lines = [f'"name": {json.dumps(view.name)}',
              f'"image": {json.dumps(rel(view.image))}',
              f'"K": {rows(view.K)}',
              f'"R": {rows(view.R)}',
-             f'"t": {json.dumps([float(x) for x in view.t])}',
+             f'"t": {numbers(view.t)}',
              f'"holdout": {json.dumps(view.holdout)}']
     if view.mask is not None:
         lines.append(f'"mask": {json.dumps(rel(view.mask))}')

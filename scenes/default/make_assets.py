@@ -49,10 +49,10 @@ LED_COLOUR = np.array([0.94, 1.0, 1.07])  # slightly cool white (about 6500-7000
 # LED tubes as capsules (end A, end B, radius m, radiance) seen from the scene centre. The
 # environment is infinitely distant; these positions only shape the bands' directions and widths.
 TUBES = (
-    ((-0.5, 0.9, 0.0), (0.5, 0.9, 0.0), 0.015, 45.0),      # overhead, running left-right
-    ((-0.4, 0.8, 0.6), (0.4, 0.8, 0.6), 0.015, 40.0),      # overhead, in front (behind camera)
-    ((-0.8, 0.15, 0.35), (-0.8, 0.75, 0.35), 0.015, 40.0),  # left side, vertical, front-left
-    ((0.8, 0.15, -0.1), (0.8, 0.75, -0.1), 0.015, 40.0),   # right side, vertical, slightly behind
+    ((-0.5, 0.9, 0.0), (0.5, 0.9, 0.0), 0.015, 36.0),      # overhead, running left-right
+    ((-0.4, 0.8, 0.6), (0.4, 0.8, 0.6), 0.015, 30.0),      # overhead, in front (behind camera)
+    ((-0.8, 0.15, 0.35), (-0.8, 0.75, 0.35), 0.015, 30.0),  # left side, vertical, front-left
+    ((0.8, 0.15, -0.1), (0.8, 0.75, -0.1), 0.015, 30.0),   # right side, vertical, slightly behind
 )
 SUPERSAMPLE = 8  # per axis, to anti-alias the thin tubes
 
