@@ -17,7 +17,7 @@ from abs.render.integrator import PathTracer
 
 
 def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4, spp=64,
-                         max_depth=4, reparam=None):
+                         max_depth=4, edges=True):
     """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``)."""
     x0 = compiled.get(name)
     direction = np.asarray(direction, float)
@@ -28,9 +28,9 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
         if grad:
             dr.enable_grad(value)
         compiled.set(name, value)
-        rp = compiled.moves_geometry() if reparam is None else (reparam and grad)
+        moving = compiled.moving_meshes() if edges else []
         image = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, spp, seed,
-                              reparam=rp)
+                              moving=moving)
         total = dr.sum(image * weights, axis=None)
         if grad:
             dr.backward(total, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)

@@ -1,9 +1,8 @@
 """Camera rays in the OpenCV pinhole convention (docs/conventions.md), generated in Dr.Jit.
 
 abs generates primary rays itself rather than through Mitsuba's ``perspective`` sensor: the
-calibration (``K`` with fx != fy, skew, any principal point) maps to rays exactly, and the
-reparameterised ray of a sample can be projected back to its attached image position, which the
-pixel filter needs for visibility gradients (:mod:`abs.render.reparam`).
+calibration (``K`` with fx != fy, skew, any principal point) maps to rays exactly, and the same
+matrices project silhouette edges for visibility gradients (:mod:`abs.render.edges`).
 """
 
 from __future__ import annotations

@@ -22,6 +22,7 @@ from abs.errors import SceneError
 from abs.params.names import Parameter, parameter_specs
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
 from abs.render.camera import Camera
+from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import opaque
@@ -70,6 +71,8 @@ class CompiledScene:
             normals = (np.array(self.params[normals_key]).reshape(-1, 3)
                        if normals_key in self.params and dr.width(self.params[normals_key]) else None)
             self._rest[obj.name] = (pos, normals, pos.mean(axis=0))
+        self._posed: dict[str, mi.Float] = {}
+        self._adjacency: dict[str, tuple] = {}
         self.values: dict[str, object] = {}
         for name, p in self.specs.items():
             if p.initial is not None:
@@ -161,7 +164,9 @@ class CompiledScene:
         rot = rotation_matrix(r)
         c = mi.Vector3f(*[float(x) for x in centre])
         p = mi.Vector3f(*[mi.Float(pos[:, i].astype(np.float32)) for i in range(3)])
-        self.params[f"{obj}.vertex_positions"] = dr.ravel(rot @ (p - c) + c + t)
+        positions = dr.ravel(rot @ (p - c) + c + t)
+        self._posed[obj] = positions
+        self.params[f"{obj}.vertex_positions"] = positions
         if normals is not None:
             nrm = mi.Vector3f(*[mi.Float(normals[:, i].astype(np.float32)) for i in range(3)])
             self.params[f"{obj}.vertex_normals"] = dr.ravel(rot @ nrm)
@@ -171,9 +176,19 @@ class CompiledScene:
             raise KeyError(f"unknown parameter {name!r}; known: {', '.join(sorted(self.specs))}")
         return self.specs[name]
 
-    def moves_geometry(self) -> bool:
-        """Whether some pose parameter is attached to the AD graph (needs reparameterisation)."""
-        return any(name.endswith(".pose") and dr.grad_enabled(v) for name, v in self.values.items())
+    def moving_meshes(self) -> list[MovingMesh]:
+        """Meshes whose pose is attached to the AD graph (their silhouettes need edge sampling)."""
+        out = []
+        for obj in self.scene.objects:
+            value = self.values.get(f"{obj.name}.pose")
+            if value is None or not dr.grad_enabled(value):
+                continue
+            if obj.name not in self._adjacency:
+                faces = np.array(self.params[f"{obj.name}.faces"], np.int64).reshape(-1, 3)
+                self._adjacency[obj.name] = (faces, *edge_adjacency(faces))
+            faces, edges, edge_faces = self._adjacency[obj.name]
+            out.append(MovingMesh(self._posed[obj.name], edges, edge_faces, faces))
+        return out
 
     # -------------------------------------------------------------- render
     def render(self, camera: Camera, spp: int | None = None, seed: int = 0,
@@ -193,7 +208,7 @@ class CompiledScene:
         for i, n in enumerate(batches):
             part = tracer.render(self.mitsuba_scene, self.environment, camera, n,
                                  seed * 7919 + i if len(batches) > 1 else seed,
-                                 reparam=self.moves_geometry()) * (n / spp)
+                                 moving=self.moving_meshes()) * (n / spp)
             image = part if image is None else image + part
             dr.eval(image)
         return image

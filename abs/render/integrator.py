@@ -11,8 +11,7 @@ with the recorded graph, so AD renders use small images or few samples per pass.
 Pieces:
 
 - Pixels: sample positions are drawn from a tent filter of radius 1 pixel around each pixel centre
-  and weighted by ``tent(x') / tent(x)``; the weight is 1 in value, and its derivative carries the
-  motion of the sample's image position ``x'`` under reparameterisation.
+  (each pixel integrates ``tent(x - p) L(x)``).
 - Colour-channel passes: glass with a different IOR per channel renders three passes, pass ``k``
   refracting with ``ior[k]`` and contributing channel ``k`` (see :mod:`abs.render.bsdfs.dielectric`).
 - Lighting: the environment (:class:`~abs.render.environment.Environment`) is evaluated by our
@@ -20,9 +19,8 @@ Pieces:
   heuristic. The weights stay *attached*: BSDF samples are differentiated in primary-sample
   space and light samples in direction space, and only attached weights keep summing to one
   under differentiation (detached weights bias gradients whenever a shading frame moves).
-- Visibility: primary rays are reparameterised (:mod:`abs.render.reparam`) when a parameter that
-  moves geometry is differentiated; shadow-ray and secondary visibility boundaries are not
-  (their pose gradients are biased low; primary silhouettes dominate object-pose gradients).
+- Visibility: when meshes move (pose), the boundary term of their silhouettes is added by edge
+  sampling (:mod:`abs.render.edges`); shadow and refracted silhouettes are not handled.
 - Russian roulette from depth ``rr_depth`` on, with detached survival probabilities.
 """
 
@@ -36,7 +34,7 @@ import mitsuba as mi
 from abs.render.bsdfs.dielectric import DielectricBSDF
 from abs.render.camera import Camera
 from abs.render.environment import Environment
-from abs.render.reparam import reparameterize
+from abs.render.edges import MovingMesh, boundary_term
 
 __all__ = ["PathTracer"]
 
@@ -45,9 +43,6 @@ def _mis_power(a, b):
     a2, b2 = dr.square(a), dr.square(b)
     return dr.select(a2 + b2 > 0.0, a2 / (a2 + b2), 0.0)
 
-
-def _tent(x):
-    return dr.maximum(1.0 - dr.abs(x), 0.0)
 
 
 @dataclass
@@ -67,7 +62,7 @@ class PathTracer:
 
     # ---------------------------------------------------------------- public
     def render(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int = 0,
-               reparam: bool = False, channels: str = "auto") -> mi.TensorXf:
+               moving: list[MovingMesh] | None = None, channels: str = "auto") -> mi.TensorXf:
         """Render one view; returns a linear-RGB ``TensorXf`` of shape ``(height, width, 3)``.
 
         The result stays attached to the AD graph of any parameter with gradients enabled.
@@ -78,8 +73,9 @@ class PathTracer:
             Samples per pixel (per colour pass).
         seed : int
             Seed of the sample sequence; the same seed gives the same noise (common random numbers).
-        reparam : bool
-            Reparameterise primary rays (needed for gradients of parameters that move geometry).
+        moving : list of MovingMesh, optional
+            Meshes whose vertices are attached to differentiated parameters: their silhouettes'
+            boundary term is added to the gradient.
         channels : {"auto", "single", "per-channel"}
             ``auto`` renders per-channel passes only when some glass has distinct per-channel IORs
             or an IOR being differentiated.
@@ -89,17 +85,17 @@ class PathTracer:
             dr.grad_enabled(b.ior) or len({float(c[0]) for c in (b.ior.x, b.ior.y, b.ior.z)}) > 1
             for b in glass))
         if not per_channel:
-            return self._render_pass(scene, env, camera, spp, seed, reparam, channel=0)
+            return self._render_pass(scene, env, camera, spp, seed, moving, channel=0)
         result = None
         for k in range(3):
-            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, reparam, channel=k)
+            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, moving, channel=k)
             mask = mi.TensorXf(dr.tile(mi.Float([1.0 if c == k else 0.0 for c in range(3)]),
                                        camera.width * camera.height), image.shape)
             result = image * mask if result is None else result + image * mask
         return result
 
     # --------------------------------------------------------------- private
-    def _render_pass(self, scene, env, camera, spp, seed, reparam, channel) -> mi.TensorXf:
+    def _render_pass(self, scene, env, camera, spp, seed, moving, channel) -> mi.TensorXf:
         w, h = camera.width, camera.height
         n = w * h * spp
         sampler = mi.load_dict({"type": "independent"})
@@ -112,25 +108,20 @@ class PathTracer:
         dx = mi.warp.interval_to_tent(offset.x)
         dy = mi.warp.interval_to_tent(offset.y)
         origin, d = camera.rays(px + dx, py + dy)
-        weight = mi.Float(1.0)
-        if reparam:
-            d_warp, det = reparameterize(scene, origin, d, sampler)
-            u, v, cos_w = camera.project_direction(d_warp)
-            _, _, cos_0 = camera.project_direction(dr.detach(d))
-            # Pixel filter at the attached image position, and the pinhole's solid-angle Jacobian.
-            weight = (_tent(u - px) * _tent(v - py)) / dr.detach(_tent(dx) * _tent(dy)) \
-                * dr.detach(dr.power(cos_0, 3)) / dr.power(cos_w, 3) * det
-            d = d_warp
         # The ray time carries the colour channel of this pass to abs_dielectric (see there).
         ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
-        radiance = self._trace(scene, env, ray, sampler) * weight
+        radiance = self._trace(scene, env, ray, sampler)
         # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
         values = [dr.block_sum(c, spp) / spp for c in (radiance.x, radiance.y, radiance.z)]
         flat = dr.zeros(mi.Float, w * h * 3)
         lane = dr.arange(mi.UInt32, w * h)
         for c in range(3):
             dr.scatter(flat, values[c], lane * 3 + c)
-        return mi.TensorXf(flat, (h, w, 3))
+        image = mi.TensorXf(flat, (h, w, 3))
+        if moving:
+            image = image + boundary_term(self, scene, env, camera, moving,
+                                          n_samples=2 * spp * (w + h), seed=seed, channel=channel)
+        return image
 
     def _trace(self, scene, env: Environment, ray: mi.Ray3f, sampler: mi.Sampler) -> mi.Color3f:
         ctx = mi.BSDFContext()
