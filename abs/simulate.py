@@ -16,12 +16,9 @@ from abs.scene.scene import Scene
 __all__ = ["place_cameras", "simulate_capture", "add_sensor_noise"]
 
 
-def _object_bounds(compiled) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    out = []
-    for shape in compiled.mitsuba_scene.shapes():
-        box = shape.bbox()
-        out.append((shape.id(), np.array(box.min, float).ravel(), np.array(box.max, float).ravel()))
-    return out
+def _object_bounds(compiled) -> list[tuple[np.ndarray, np.ndarray]]:
+    return [(np.array(box.min, float).ravel(), np.array(box.max, float).ravel())
+            for box in (shape.bbox() for shape in compiled.mitsuba_scene.shapes())]
 
 
 def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: float = 30.0,
@@ -39,7 +36,7 @@ def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: fl
         ``name``, ``K``, ``R``, ``t`` per camera (OpenCV convention).
     """
     bounds = _object_bounds(compiled)
-    solid = [(lo, hi) for _, lo, hi in bounds if np.min(hi - lo) > 1e-6] or [(lo, hi) for _, lo, hi in bounds]
+    solid = [(lo, hi) for lo, hi in bounds if np.min(hi - lo) > 1e-6] or bounds
     lo = np.min([b[0] for b in solid], axis=0)
     hi = np.max([b[1] for b in solid], axis=0)
     target = (lo + hi) / 2

@@ -102,48 +102,41 @@ parameters = ["glass.absorption"]
     return root
 
 
+def _single_sphere_scene(root: Path, small_scene_dir: Path, name: str, fields: str) -> Path:
+    """``small_scene_dir``'s sphere alone, with material ``name`` of the given TOML ``fields``,
+    under ``env.exr`` (copied from ``small_scene_dir`` unless ``root`` already has one)."""
+    (root / "sphere.ply").write_bytes((small_scene_dir / "sphere.ply").read_bytes())
+    if not (root / "env.exr").exists():
+        (root / "env.exr").write_bytes((small_scene_dir / "env.exr").read_bytes())
+    (root / "scene.toml").write_text(f"""
+[environment]
+file = "env.exr"
+
+[materials.{name}]
+{fields}
+
+[[objects]]
+name = "sphere"
+mesh = "sphere.ply"
+material = "{name}"
+""")
+    return root
+
+
 @pytest.fixture(scope="session")
 def silhouette_scene_dir(tmp_path_factory, small_scene_dir) -> Path:
     """A diffuse sphere alone under a uniform white environment."""
     from abs.io.images import write_exr
 
     root = tmp_path_factory.mktemp("silhouette_scene")
-    (root / "sphere.ply").write_bytes((small_scene_dir / "sphere.ply").read_bytes())
     write_exr(root / "env.exr", np.ones((16, 32, 3), np.float32))
-    (root / "scene.toml").write_text("""
-[environment]
-file = "env.exr"
-
-[materials.paint]
-type = "diffuse"
-reflectance = [0.5, 0.5, 0.5]
-
-[[objects]]
-name = "sphere"
-mesh = "sphere.ply"
-material = "paint"
-""")
-    return root
+    return _single_sphere_scene(root, small_scene_dir,
+                                'paint', 'type = "diffuse"\nreflectance = [0.5, 0.5, 0.5]')
 
 
 @pytest.fixture(scope="session")
 def glass_scene_dir(tmp_path_factory, small_scene_dir) -> Path:
     """A glass sphere alone under the structured environment (no edges seen through it)."""
-    root = tmp_path_factory.mktemp("glass_scene")
-    for name in ("sphere.ply", "env.exr"):
-        (root / name).write_bytes((small_scene_dir / name).read_bytes())
-    (root / "scene.toml").write_text("""
-[environment]
-file = "env.exr"
-
-[materials.glass]
-type = "dielectric"
-ior = [1.5, 1.5, 1.5]
-absorption = [2.0, 4.0, 8.0]
-
-[[objects]]
-name = "sphere"
-mesh = "sphere.ply"
-material = "glass"
-""")
-    return root
+    return _single_sphere_scene(
+        tmp_path_factory.mktemp("glass_scene"), small_scene_dir,
+        'glass', 'type = "dielectric"\nior = [1.5, 1.5, 1.5]\nabsorption = [2.0, 4.0, 8.0]')

@@ -63,10 +63,8 @@ class Camera:
         d = dr.normalize(rt @ d_cam)
         return opaque(mi.Point3f, *self.center.tolist()), d
 
-    def project_direction(self, d: mi.Vector3f) -> tuple[mi.Float, mi.Float, mi.Float]:
-        """Pixel position of world direction ``d`` from the centre, and the cosine between ``d``
-        and the optical axis (for the solid-angle Jacobian ``cos^3``)."""
+    def project(self, p: mi.Point3f) -> tuple[mi.Float, mi.Float]:
+        """Pixel position ``(u, v)`` of world points ``p``, differentiable in ``p``."""
         _, _, k, r = self._mats()
-        x = r @ d
-        p = k @ x
-        return p.x / p.z, p.y / p.z, x.z / dr.norm(x)
+        q = k @ (r @ p + opaque(mi.Vector3f, *self.t.tolist()))
+        return q.x / q.z, q.y / q.z

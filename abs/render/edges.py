@@ -26,6 +26,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from abs.camera.pinhole import project
+
 __all__ = ["MovingMesh", "edge_adjacency", "silhouette_edges", "boundary_term"]
 
 # Offset of the two radiance probes from the edge, in pixels: small against a pixel, but outside
@@ -87,29 +89,23 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
                   seed: int, channel: int) -> mi.TensorXf:
     """The silhouette boundary term of the image derivative (zero-valued, attached)."""
     w, h = camera.width, camera.height
-    K, R, t = camera.K, camera.R, camera.t
-    eye = camera.center
-    starts, ends, owners, edge_ids = [], [], [], []
-    for m, mesh in enumerate(meshes):
-        vertices = np.array(dr.detach(mesh.positions), np.float64).reshape(-1, 3)
-        sil = silhouette_edges(vertices, mesh, eye)
-        cam = (R @ vertices.T).T + t
-        ok = cam[:, 2] > 1e-6
-        pix = (K @ cam.T).T
-        pix = pix[:, :2] / np.where(ok, pix[:, 2], 1.0)[:, None]
-        e = mesh.edges[sil]
-        keep = ok[e[:, 0]] & ok[e[:, 1]]
-        starts.append(pix[e[keep, 0]])
-        ends.append(pix[e[keep, 1]])
-        owners.append(np.full(int(keep.sum()), m))
-        edge_ids.append(sil[keep])
-    a, b = np.concatenate(starts), np.concatenate(ends)
-    lengths = np.linalg.norm(b - a, axis=1)
     flat = dr.zeros(mi.Float, w * h * 3)
+    # All moving meshes as one vertex array, with edges as global vertex indices.
+    pixels, edges, offset = [], [], 0
+    for mesh in meshes:
+        vertices = np.array(dr.detach(mesh.positions), np.float64).reshape(-1, 3)
+        pix = project(camera.K, camera.R, camera.t, vertices)  # NaN behind the camera
+        e = mesh.edges[silhouette_edges(vertices, mesh, camera.center)]
+        in_front = np.isfinite(pix[e]).all(axis=(1, 2))
+        pixels.append(pix)
+        edges.append(e[in_front] + offset)
+        offset += len(vertices)
+    pix, edges = np.concatenate(pixels), np.concatenate(edges)
+    a, b = pix[edges[:, 0]], pix[edges[:, 1]]
+    lengths = np.linalg.norm(b - a, axis=1)
     total = float(lengths.sum())
     if total <= 0:
         return mi.TensorXf(flat, (h, w, 3))
-    owner, edge_id = np.concatenate(owners), np.concatenate(edge_ids)
 
     rng = np.random.default_rng(seed)
     pick = rng.choice(len(lengths), size=n_samples, p=lengths / total)
@@ -118,34 +114,17 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
     normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1)
     x = a[pick] + s[:, None] * (b - a)[pick]
 
-    # Attached image position of each edge point: project the attached edge end points.
-    xs = []
-    for m, mesh in enumerate(meshes):
-        sel = owner[pick] == m
-        verts = mesh.edges[edge_id[pick][sel]]
-        p = mesh.positions
+    # Attached image position of each edge point, through the attached end points.
+    positions = dr.concat([m.positions for m in meshes]) if len(meshes) > 1 else meshes[0].positions
 
-        def vertex(idx):
-            idx = mi.UInt32(idx.astype(np.uint32))
-            return mi.Vector3f(dr.gather(mi.Float, p, idx * 3), dr.gather(mi.Float, p, idx * 3 + 1),
-                               dr.gather(mi.Float, p, idx * 3 + 2))
+    def vertex(index: np.ndarray) -> mi.Vector3f:
+        i = mi.UInt32(index.astype(np.uint32)) * 3
+        return mi.Vector3f(*[dr.gather(mi.Float, positions, i + k) for k in range(3)])
 
-        pa, pb = vertex(verts[:, 0]), vertex(verts[:, 1])
-        ss = mi.Float(s[sel].astype(np.float32))
-        xs.append((np.nonzero(sel)[0], _project(camera, pa), _project(camera, pb), ss))
-    # Reassemble in sample order.
-    order = np.concatenate([i for i, *_ in xs])
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(len(order))
-    xa = [dr.concat([q[1][k] for q in xs]) if len(xs) > 1 else xs[0][1][k] for k in range(2)]
-    xb = [dr.concat([q[2][k] for q in xs]) if len(xs) > 1 else xs[0][2][k] for k in range(2)]
-    ss = dr.concat([q[3] for q in xs]) if len(xs) > 1 else xs[0][3]
-    inv = mi.UInt32(inverse.astype(np.uint32))
-    xa = [dr.gather(mi.Float, c, inv) for c in xa]
-    xb = [dr.gather(mi.Float, c, inv) for c in xb]
-    ss = dr.gather(mi.Float, ss, inv)
-    px = xa[0] + ss * (xb[0] - xa[0])
-    py = xa[1] + ss * (xb[1] - xa[1])
+    ua, va = camera.project(vertex(edges[pick, 0]))
+    ub, vb = camera.project(vertex(edges[pick, 1]))
+    ss = mi.Float(s.astype(np.float32))
+    px, py = ua + ss * (ub - ua), va + ss * (vb - va)
     nx, ny = (mi.Float(normal[:, i].astype(np.float32)) for i in range(2))
     velocity = (px - dr.detach(px)) * nx + (py - dr.detach(py)) * ny  # zero value, attached
 
@@ -176,9 +155,3 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
                 dr.scatter_add(flat, value * weight, index + c, mi.Bool(inside))
     return mi.TensorXf(flat, (h, w, 3))
 
-
-def _project(camera, p: mi.Vector3f) -> tuple[mi.Float, mi.Float]:
-    _, _, k, r = camera._mats()
-    t = mi.Vector3f(*[float(v) for v in camera.t])
-    q = k @ (r @ p + t)
-    return q.x / q.z, q.y / q.z
