@@ -37,6 +37,7 @@ __all__ = [
     "image_size",
     "read_image",
     "write_exr",
+    "auto_exposure",
     "tonemap",
     "write_png",
     "read_mask",
@@ -304,6 +305,28 @@ def write_exr(path: str | Path, rgb: np.ndarray, *, allow_nonfinite: bool = Fals
         exr.write(str(path))
 
 
+def auto_exposure(rgb: np.ndarray) -> float:
+    """Exposure :func:`tonemap` picks by default: the 99th percentile of luminance maps to 0.9.
+
+    Computing it once from a photograph and passing it to :func:`tonemap` for the renderings of
+    the same view shows them all at the same exposure.
+
+    Parameters
+    ----------
+    rgb : np.ndarray
+        ``(height, width, 3)`` linear RGB; non-finite values are ignored.
+
+    Returns
+    -------
+    float
+        Linear multiplier; 1.0 when the image is black (or has no finite value).
+    """
+    lum = luminance(_as_rgb_array(rgb))
+    lum = lum[np.isfinite(lum)]
+    p99 = float(np.percentile(lum, 99)) if lum.size else 0.0
+    return 0.9 / p99 if p99 > 0 else 1.0
+
+
 def tonemap(rgb: np.ndarray, exposure: float | None = None) -> np.ndarray:
     """Tone-map linear RGB to 8-bit sRGB for display.
 
@@ -326,10 +349,7 @@ def tonemap(rgb: np.ndarray, exposure: float | None = None) -> np.ndarray:
     """
     arr = _as_rgb_array(rgb).astype(np.float32)
     if exposure is None:
-        lum = luminance(arr)
-        lum = lum[np.isfinite(lum)]
-        p99 = float(np.percentile(lum, 99)) if lum.size else 0.0
-        exposure = 0.9 / p99 if p99 > 0 else 1.0
+        exposure = auto_exposure(arr)
     scaled = np.nan_to_num(arr * np.float32(exposure), nan=0.0, posinf=1.0, neginf=0.0)
     encoded = linear_to_srgb(np.clip(scaled, 0.0, 1.0))
     return np.round(encoded * 255.0).astype(np.uint8)
