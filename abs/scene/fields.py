@@ -5,7 +5,7 @@ same way."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +16,11 @@ from abs.errors import SceneError
 __all__ = ["Fields"]
 
 _MISSING = object()
+
+
+def _has_bool(value: Any) -> bool:
+    """TOML ``true`` anywhere in a (nested) list; numpy would silently read it as 1."""
+    return isinstance(value, bool) or (isinstance(value, list) and any(map(_has_bool, value)))
 
 
 @dataclass(frozen=True)
@@ -30,11 +35,16 @@ class Fields:
         The scene file, for error messages and for resolving relative asset paths.
     prefix : str
         Dotted path of this table inside the file, e.g. ``materials.glass``.
+    files : dict
+        Asset paths resolved by :meth:`file`, keyed by dotted field path; shared with the tables
+        :meth:`sub` returns, so that a scene can be written elsewhere with its asset paths
+        rewritten (:func:`abs.scene.write.write_scene`) without each material declaring them.
     """
 
     table: dict
     source: Path
     prefix: str
+    files: dict[str, Path] = field(default_factory=dict, compare=False, repr=False)
 
     def path(self, key: str) -> str:
         return f"{self.prefix}.{key}" if self.prefix else key
@@ -50,7 +60,7 @@ class Fields:
             return None
         if not isinstance(value, dict):
             raise self.error(key, f"expected a table, got {type(value).__name__}")
-        return Fields(value, self.source, self.path(key))
+        return Fields(value, self.source, self.path(key), self.files)
 
     def has(self, key: str) -> bool:
         return key in self.table
@@ -97,9 +107,13 @@ class Fields:
     def _array(self, key: str, value: Any, shape: tuple[int, ...], lower: float | None,
                upper: float | None) -> np.ndarray:
         try:
-            arr = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise self.error(key, f"expected numbers of shape {list(shape)}, got {value!r}") from None
+            arr = np.asarray(value)
+        except (TypeError, ValueError):  # ragged nesting
+            arr = None
+        # Checked before converting: numpy would turn "1.5" and true into numbers.
+        if arr is None or arr.dtype.kind not in "iuf" or _has_bool(value):
+            raise self.error(key, f"expected numbers of shape {list(shape)}, got {value!r}")
+        arr = arr.astype(np.float64)
         if arr.shape != shape:
             raise self.error(key, f"expected shape {list(shape)}, got {list(arr.shape)}")
         if not np.all(np.isfinite(arr)):
@@ -110,13 +124,18 @@ class Fields:
             raise self.error(key, f"all entries must be <= {upper}, got {arr.tolist()}")
         return arr
 
+    def vector(self, key: str, size: int, default: Any = _MISSING, lower: float | None = None,
+               upper: float | None = None) -> np.ndarray:
+        """``size`` numbers; a single number means the same for all of them."""
+        value = self.raw(key, default)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            value = [value] * size
+        return self._array(key, value, (size,), lower, upper)
+
     def rgb(self, key: str, default: Any = _MISSING, lower: float | None = None,
             upper: float | None = None) -> np.ndarray:
         """A per-channel (R, G, B) quantity; a single number means the same in all channels."""
-        value = self.raw(key, default)
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            value = [value] * 3
-        return self._array(key, value, (3,), lower, upper)
+        return self.vector(key, 3, default, lower, upper)
 
     def file(self, key: str, default: Any = _MISSING, suffixes: tuple[str, ...] = ()) -> Path:
         """A path relative to the scene file that must exist."""
@@ -126,7 +145,16 @@ class Fields:
             raise self.error(key, f"unsupported file type {path.suffix!r}; expected {', '.join(suffixes)}")
         if not path.is_file():
             raise self.error(key, f"file not found: {path}")
+        self.files[self.path(key)] = path
         return path
+
+    def files_below(self) -> dict[str, Path]:
+        """Files resolved by :meth:`file` in this table and its sub-tables, keyed by field path
+        relative to this table (``reflectance``, not ``materials.cloth.reflectance``)."""
+        if not self.prefix:
+            return dict(self.files)
+        start = self.prefix + "."
+        return {key[len(start):]: path for key, path in self.files.items() if key.startswith(start)}
 
     def transform(self, key: str) -> np.ndarray:
         """An optional row-major 4x4 affine matrix (identity when absent)."""

@@ -7,13 +7,16 @@ from __future__ import annotations
 
 import re
 import tomllib
+from dataclasses import replace
 from pathlib import Path
+
+import numpy as np
 
 from abs.errors import SceneError
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
-from abs.scene.scene import EnvironmentSpec, ObjectSpec, RenderSettings, Scene
+from abs.scene.scene import EnvironmentSpec, ObjectSpec, Prior, RenderSettings, Scene
 
 __all__ = ["load_scene"]
 
@@ -80,6 +83,7 @@ def load_scene(path: str | Path) -> Scene:
             raise fields.error("type", f"unknown material type {type_name!r}; known types: "
                                        f"{', '.join(material_types())}")
         materials[name] = cls.from_fields(name, fields)
+        materials[name]._files = fields.files_below()
     if not materials:
         raise mat_fields.error("", "no materials defined")
 
@@ -111,22 +115,51 @@ def load_scene(path: str | Path) -> Scene:
             pose=fields.array("pose", (6,), default=[0.0] * 6),
         ))
 
-    fit_parameters: tuple[str, ...] = ()
+    scene = Scene(source, render, environment, materials, tuple(objects))
     fit_fields = root.sub("fit", required=False)
-    if fit_fields is not None:
-        fit_fields.check_known({"parameters"})
-        names = fit_fields.raw("parameters", [])
-        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-            raise fit_fields.error("parameters", f"expected a list of parameter names, got {names!r}")
-        fit_parameters = tuple(names)
-
-    scene = Scene(source, render, environment, materials, tuple(objects), fit_parameters)
+    if fit_fields is None:
+        return scene
+    fit_fields.check_known({"parameters", "priors"})
     # Validate parameter names now, so a typo fails at load time rather than mid-fit.
     from abs.params.names import parameter_specs
 
     known = parameter_specs(scene)
-    for i, name in enumerate(fit_parameters):
+    return replace(scene, fit_parameters=_fit_parameters(fit_fields, known),
+                   fit_priors=_fit_priors(fit_fields, known))
+
+
+def _fit_parameters(fit_fields: Fields, known: dict) -> tuple[str, ...]:
+    names = fit_fields.raw("parameters", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise fit_fields.error("parameters", f"expected a list of parameter names, got {names!r}")
+    for i, name in enumerate(names):
         if name not in known:
-            raise SceneError(source, f"fit.parameters[{i}]",
-                             f"unknown parameter {name!r}; known: {', '.join(sorted(known))}")
-    return scene
+            raise fit_fields.error(f"parameters[{i}]",
+                                   f"unknown parameter {name!r}; known: {', '.join(sorted(known))}")
+    return tuple(names)
+
+
+def _fit_priors(fit_fields: Fields, known: dict) -> dict[str, Prior]:
+    """``[fit.priors."NAME"]`` tables: ``mean`` and ``sd`` (> 0) of the parameter's size."""
+    table = fit_fields.sub("priors", required=False)
+    if table is None:
+        return {}
+    priors = {}
+    for name, raw in table.table.items():
+        # Parameter names contain a dot, so the key is quoted in the file and in messages.
+        key = f'"{name}"'
+        if name not in known:
+            raise table.error(key, f"unknown parameter {name!r}; known: {', '.join(sorted(known))}")
+        if not isinstance(raw, dict):
+            raise table.error(key, f"expected a table with mean and sd, got {raw!r}")
+        size = known[name].size
+        if size == -1:
+            raise table.error(key, f"{name} has no fixed size (a texture); it cannot have a prior")
+        fields = Fields(raw, table.source, table.path(key))
+        fields.check_known({"mean", "sd"})
+        mean = fields.vector("mean", size)
+        sd = fields.vector("sd", size)
+        if np.any(sd <= 0):
+            raise fields.error("sd", f"all entries must be > 0, got {sd.tolist()}")
+        priors[name] = Prior(mean, sd)
+    return priors

@@ -13,7 +13,7 @@ import numpy as np
 
 from abs.scene.materials.base import Material
 
-__all__ = ["RenderSettings", "EnvironmentSpec", "ObjectSpec", "Scene"]
+__all__ = ["RenderSettings", "EnvironmentSpec", "ObjectSpec", "Prior", "Scene"]
 
 
 @dataclass(frozen=True)
@@ -50,6 +50,35 @@ class ObjectSpec:
 
 
 @dataclass(frozen=True)
+class Prior:
+    """``[fit.priors."NAME"]``: an independent Gaussian prior on each scalar of a parameter.
+
+    Attributes
+    ----------
+    mean : ndarray
+        Prior mean, one entry per scalar of the parameter, in the parameter's unit.
+    sd : ndarray
+        Standard deviation (> 0), same shape and unit as ``mean``.
+    """
+
+    mean: np.ndarray
+    sd: np.ndarray
+
+    def __post_init__(self):
+        # Read-only float copies: the dataclass is frozen, its arrays should be too.
+        for name in ("mean", "sd"):
+            arr = np.array(getattr(self, name), dtype=np.float64, ndmin=1)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+        if self.mean.shape != self.sd.shape or self.mean.ndim != 1:
+            raise ValueError(f"prior mean and sd must be vectors of one size, got shapes "
+                             f"{list(self.mean.shape)} and {list(self.sd.shape)}")
+        if not (np.all(np.isfinite(self.mean)) and np.all(np.isfinite(self.sd)) and np.all(self.sd > 0)):
+            raise ValueError(f"prior needs finite mean and sd > 0, got mean {self.mean.tolist()}, "
+                             f"sd {self.sd.tolist()}")
+
+
+@dataclass(frozen=True)
 class Scene:
     """A whole scene file.
 
@@ -59,6 +88,8 @@ class Scene:
         The file it was read from (assets are resolved relative to it).
     fit_parameters : tuple of str
         Names from ``[fit] parameters`` (fitted by default).
+    fit_priors : dict of str to Prior
+        ``[fit.priors]``: Gaussian priors by parameter name (any known parameter, fitted or not).
     """
 
     source: Path
@@ -67,6 +98,7 @@ class Scene:
     materials: dict[str, Material]
     objects: tuple[ObjectSpec, ...]
     fit_parameters: tuple[str, ...] = ()
+    fit_priors: dict[str, Prior] = field(default_factory=dict)
 
     def object(self, name: str) -> ObjectSpec:
         for obj in self.objects:

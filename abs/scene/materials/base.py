@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, ClassVar
 
 import numpy as np
@@ -70,6 +71,14 @@ class Material(ABC):
         """The TOML table that reproduces this material (for writing fitted scenes)."""
         return dict(self._toml)
 
+    def file_fields(self) -> dict[str, Path]:
+        """Fields of :meth:`to_toml` that name asset files, with the absolute files they name.
+
+        Filled by the loader from what :meth:`Fields.file` resolved, so a material type gets its
+        paths rewritten by :func:`abs.scene.write.write_scene` without declaring them.
+        """
+        return dict(self._files)
+
     def parameters(self) -> dict[str, ParameterSpec]:
         """Differentiable fields, keyed by field name."""
         return {}
@@ -86,6 +95,7 @@ class Material(ABC):
         raise NotImplementedError(f"{type(self).__name__}.{field} has no custom binding")
 
     _toml: dict
+    _files: dict[str, Path] = {}  # set by the loader; shared default is never mutated
 
 
 _REGISTRY: dict[str, type[Material]] = {}
