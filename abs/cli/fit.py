@@ -1,0 +1,110 @@
+"""``abs fit SCENE CAPTURE --out DIR``: fit parameters, write fit.json, the fitted scene, a report."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("fit", help="fit scene parameters to a capture's photographs")
+    p.add_argument("scene", type=Path, help="scene file (TOML)")
+    p.add_argument("capture", type=Path, help="capture folder (cameras.json)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--params", help="comma-separated parameter names (default: the scene's [fit])")
+    p.add_argument("--method", choices=("auto", "lm", "adam"), default="auto",
+                   help="Levenberg-Marquardt (few scalars) or Adam (many); auto picks")
+    p.add_argument("--spp", type=int, default=16, help="samples per pixel of fitting renders")
+    p.add_argument("--downsample", type=int, default=1, help="compare images reduced by this factor")
+    p.add_argument("--clamp", type=float, default=None,
+                   help="clamp renderings at this value (photographs that saturate, e.g. 1.0)")
+    p.add_argument("--max-iterations", type=int, default=20)
+    p.add_argument("--refinement-steps", type=int, default=4,
+                   help="Gauss-Newton steps on independent renders after Levenberg-Marquardt")
+    p.add_argument("--learning-rate", type=float, default=0.05, help="Adam step (typical steps)")
+    p.add_argument("--spp-schedule", default="", help="Adam: ITER:SPP,... e.g. 0:4,20:16")
+    p.add_argument("--downsample-schedule", default="", help="Adam: ITER:FACTOR,... e.g. 0:4,10:2,20:1")
+    p.add_argument("--eval-spp", type=int, default=None,
+                   help="samples per pixel of the before/after renders (default: the scene's)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
+    p.add_argument("--no-report", action="store_true", help="skip the HTML report")
+    p.set_defaults(run=run)
+
+
+def _truth(capture: Path, names) -> dict | None:
+    """True values recorded by ``abs simulate`` (synthetic captures only)."""
+    path = capture / "simulation.json"
+    if not path.exists():
+        return None
+    truth = json.loads(path.read_text()).get("truth", {})
+    return {n: truth[n] for n in names if n in truth} or None
+
+
+def run(args) -> int:
+    from tqdm import tqdm
+
+    from abs.fitting import FitSettings, OptimizerState, fit
+    from abs.fitting.settings import parse_schedule
+    from abs.io.fit_files import FIT_FILE, load_checkpoint, save_checkpoint, write_json
+    from abs.io.images import write_exr
+    from abs.report import ReportView, write_fit_report
+    from abs.scene import load_scene
+    from abs.scene.write import write_scene
+
+    settings = FitSettings(
+        method=args.method, spp=args.spp, downsample=args.downsample, clamp=args.clamp,
+        max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
+        learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
+        downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
+        seed=args.seed)
+    scene = load_scene(args.scene)
+    names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
+    identity = {"scene": str(scene.source), "capture": str(args.capture.resolve()),
+                "parameters": list(names or scene.fit_parameters),
+                "settings": json.loads(json.dumps(asdict(settings)))}
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    resume = None
+    if args.resume:
+        saved = load_checkpoint(out, identity)
+        if saved is None:
+            print(f"no checkpoint in {out}; starting a new fit")
+        else:
+            resume = OptimizerState.from_dict(saved)
+            print(f"resuming after iteration {resume.iteration}")
+
+    total = settings.max_iterations + (settings.refinement_steps if settings.method != "adam" else 0)
+    bar = tqdm(total=total, desc="fit", unit="it", initial=resume.iteration if resume else 0)
+
+    def on_iteration(state) -> None:
+        save_checkpoint(out, identity, state.to_dict())
+        bar.total = max(bar.total, state.iteration)
+        bar.update(state.iteration - bar.n)
+        bar.set_postfix(rmse=f"{state.history[-1]['loss']:.4g}")
+
+    result = fit(scene, args.capture, names, settings, resume=resume, on_iteration=on_iteration,
+                 truth=_truth(args.capture, names or scene.fit_parameters))
+    bar.close()
+
+    summary = result.summary()
+    write_json(out / FIT_FILE, summary)
+    write_scene(scene, out / "scene.toml", result.values)
+    (out / "renders").mkdir(exist_ok=True)
+    for view in result.views:
+        write_exr(out / "renders" / f"{view.name}.exr", view.after.astype("float32"))
+    if not args.no_report:
+        views = [ReportView(v.name, v.holdout, v.photograph, v.before, v.after) for v in result.views]
+        report = write_fit_report(out / "report", summary, views, result.history)
+        print(f"report: {report}")
+    for name, entry in summary["parameters"].items():
+        values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g}"
+                           for v, s in zip(entry["value"], entry["stderr"]))
+        print(f"{name} = [{values}] {entry['unit']}")
+    for split in ("train", "holdout"):
+        m = summary[f"{split}_rmse"]
+        if m["before"] is not None:
+            print(f"{split} RMSE {m['before']:.4g} -> {m['after']:.4g}")
+    print(f"wrote {out / FIT_FILE}")
+    return 0

@@ -1,0 +1,8 @@
+"""Fitting: find the parameter values that make renderings match photographs (``abs.fit``),
+their Laplace uncertainty, and the per-channel RMSE scans of the seed papers (``abs.scan``)."""
+
+from abs.fitting.fit import FitResult, fit
+from abs.fitting.optimizers import OptimizerState
+from abs.fitting.settings import FitSettings
+
+__all__ = ["fit", "FitResult", "FitSettings", "OptimizerState"]

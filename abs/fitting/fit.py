@@ -1,0 +1,266 @@
+"""``abs.fit``: fit named scene parameters to a capture, with uncertainty.
+
+One call does the whole job: render every view with the initial parameters, optimise on the
+training views (Levenberg-Marquardt or Adam, see ``optimizers.py``), render every view again,
+and estimate standard errors and correlations by the Laplace approximation. Holdout views are
+never fitted; they are rendered and reported before and after. Storage (fit.json, checkpoints,
+report) and progress display are the caller's: pass ``on_iteration`` to observe the run.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from abs.fitting.laplace import LaplaceApproximation, laplace
+from abs.fitting.observations import Observation, estimate_image_noise, observe
+from abs.fitting.optimizers import (OptimizerState, adam, gauss_newton_refinement,
+                                    levenberg_marquardt)
+from abs.fitting.parameters import ParameterVector
+from abs.fitting.problem import FitProblem, RenderCounter
+from abs.fitting.settings import LM_MAX_SCALARS, FitSettings, schedule_value
+from abs.metrics import ssim
+
+__all__ = ["fit", "FitResult", "ViewRenderings", "prepare"]
+
+
+@dataclass(frozen=True)
+class ViewRenderings:
+    """A view's photograph and its renderings before and after the fit (full resolution)."""
+
+    name: str
+    holdout: bool
+    photograph: np.ndarray
+    before: np.ndarray
+    after: np.ndarray
+    mask: np.ndarray
+
+
+@dataclass
+class FitResult:
+    """What a fit found. :meth:`summary` is the content of ``fit.json``."""
+
+    vector: ParameterVector
+    values: dict[str, np.ndarray]
+    initial: dict[str, np.ndarray]
+    uncertainty: LaplaceApproximation
+    metrics: dict[str, dict[str, float]]
+    method: str
+    iterations: int
+    renders: int
+    samples_rendered: int
+    wall_s: float
+    history: list[dict]
+    views: list[ViewRenderings] = field(repr=False, default_factory=list)
+    truth: dict[str, list] | None = None
+
+    def summary(self) -> dict:
+        """``fit.json`` (public contract, see docs/fit-output.md)."""
+        stderr = self.vector.split(self.uncertainty.stderr)
+        parameters = {}
+        for name, unit in zip(self.vector.names, self.vector.units):
+            entry = {"value": self.values[name].tolist(),
+                     "stderr": [None if not np.isfinite(s) else float(s) for s in stderr[name]],
+                     "unit": unit, "initial": self.initial[name].tolist()}
+            if self.truth and name in self.truth:
+                entry["truth"] = list(self.truth[name])
+            parameters[name] = entry
+        corr = np.where(np.isfinite(self.uncertainty.correlation), self.uncertainty.correlation, np.nan)
+        return {
+            "parameters": parameters,
+            "correlation": {"names": self.vector.labels(),
+                            "matrix": [[None if not np.isfinite(c) else round(float(c), 6) for c in row]
+                                       for row in corr]},
+            "pixel_sigma": self.uncertainty.pixel_sigma,
+            **self.metrics,
+            "renders": self.renders,
+            "samples_rendered": self.samples_rendered,
+            "wall_s": round(self.wall_s, 3),
+            "iterations": self.iterations,
+            "method": self.method,
+        }
+
+
+def prepare(scene, capture, parameters=None):
+    """Load (if given paths) and compile a scene and capture; check the parameter names.
+
+    Returns ``(scene, compiled, capture, names)``.
+    """
+    from abs.io.capture import load_capture
+    from abs.render import compile_scene
+    from abs.scene.load import load_scene
+
+    scene = load_scene(scene) if isinstance(scene, (str, Path)) else scene
+    capture = load_capture(capture) if isinstance(capture, (str, Path)) else capture
+    names = tuple(parameters) if parameters else scene.fit_parameters
+    if not names:
+        raise ValueError(f"{scene.source}: no parameters to fit (give them, or list them in the "
+                         "scene's [fit] parameters)")
+    compiled = compile_scene(scene)
+    for name in names:
+        if name not in compiled.specs:
+            raise KeyError(f"unknown parameter {name!r}; known: {', '.join(sorted(compiled.specs))}")
+    if not capture.train_views:
+        raise ValueError(f"{capture.folder}: every view is a holdout view; nothing to fit")
+    return scene, compiled, capture, names
+
+
+def _evaluate(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
+              seed: int) -> dict[str, np.ndarray]:
+    return {o.name: problem.render(o, theta, spp, seed + 7 * i) for i, o in enumerate(observations)}
+
+
+def _metrics(observations, renders) -> dict[str, float]:
+    out = {}
+    for split, holdout in (("train", False), ("holdout", True)):
+        chosen = [o for o in observations if o.holdout == holdout]
+        if not chosen:
+            out[f"{split}_rmse"] = out[f"{split}_ssim"] = None
+            continue
+        sq = sum(float(np.sum(np.square(renders[o.name] - o.photograph)[o.mask])) for o in chosen)
+        out[f"{split}_rmse"] = float(np.sqrt(sq / sum(3 * o.pixels for o in chosen)))
+        out[f"{split}_ssim"] = float(np.mean([ssim(renders[o.name], o.photograph, o.mask)
+                                              for o in chosen]))
+    return out
+
+
+def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
+        resume: OptimizerState | None = None,
+        on_iteration: Callable[[OptimizerState], None] | None = None,
+        truth: dict[str, list] | None = None) -> FitResult:
+    """Fit scene parameters to a capture's training views.
+
+    Parameters
+    ----------
+    scene : Scene or path
+        The scene file; its current values are the starting point.
+    capture : Capture or path
+        Capture folder (``cameras.json``); holdout views are only evaluated.
+    parameters : sequence of str, optional
+        Parameter names (``glass.absorption``, ``environment.scale``, ``sphere.pose``...);
+        default: the scene's ``[fit] parameters``.
+    settings : FitSettings
+    resume : OptimizerState, optional
+        Continue an interrupted fit (from its checkpoint).
+    on_iteration : callable, optional
+        Called with the :class:`OptimizerState` after every iteration (progress, checkpoints).
+    truth : dict, optional
+        Known true values (synthetic captures), copied into the summary for comparison.
+
+    Returns
+    -------
+    FitResult
+    """
+    t0 = time.perf_counter()
+    scene, compiled, capture, names = prepare(scene, capture, parameters)
+    priors = {n: p for n, p in scene.fit_priors.items() if n in names}
+    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    method = settings.resolved_method(vector.size)
+    if resume is not None and (resume.method != method or resume.z.size != vector.size):
+        raise ValueError(f"checkpoint is a {resume.method} fit of {resume.z.size} scalars; this "
+                         f"fit is {method} with {vector.size}")
+    counter = RenderCounter()
+
+    def problem_at(factor: int, views) -> FitProblem:
+        return FitProblem(compiled, vector, [observe(v, factor) for v in views], settings.clamp,
+                          counter=counter)
+
+    full = problem_at(1, capture.views)
+    eval_spp = settings.eval_spp or scene.render.spp
+    before = _evaluate(full, full.observations, vector.initial, eval_spp, settings.seed + 1)
+
+    prior_mean = np.full(vector.size, np.nan)
+    prior_sd = np.full(vector.size, np.inf)
+    for name, s in vector.slices().items():
+        if name in priors:
+            prior_mean[s], prior_sd[s] = priors[name].mean, priors[name].sd
+    has_prior = np.isfinite(prior_sd)
+
+    problems: dict[int, FitProblem] = {}
+
+    def train_problem(factor: int) -> FitProblem:
+        if factor not in problems:
+            problems[factor] = problem_at(factor, capture.train_views)
+        return problems[factor]
+
+    # Pixel noise (photograph + Monte-Carlo) weighs the pixels against the priors.
+    first = train_problem(settings.downsample)
+    sigma = float(np.hypot(
+        estimate_image_noise(first.observations[0].photograph),
+        estimate_image_noise(first.render(first.observations[0], vector.initial, settings.spp,
+                                          settings.seed + 3))))
+    sigma = max(sigma, 1e-4)
+
+    state = resume or OptimizerState(method, 0, vector.to_unconstrained(vector.initial))
+    previous_wall = float(state.history[-1].get("wall_s", 0.0)) if state.history else 0.0
+
+    def iteration_done(s: OptimizerState) -> None:
+        s.history[-1]["wall_s"] = previous_wall + time.perf_counter() - t0
+        if on_iteration is not None:
+            on_iteration(s)
+
+    if method == "lm":
+        problem = train_problem(settings.downsample)
+
+        def evaluate(z, iteration, seeds=(settings.seed, None)):
+            theta, dtheta = vector.to_physical(z), vector.derivative(z)
+            r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
+            loss = float(np.sqrt(np.mean(r ** 2)))
+            r, J = r / sigma, J * dtheta / sigma
+            if has_prior.any():
+                r = np.concatenate([r, ((theta - prior_mean) / prior_sd)[has_prior]])
+                J = np.concatenate([J, (np.diag(dtheta / prior_sd))[has_prior]])
+            return r, J, loss
+
+        n_res = problem.n_residuals + int(has_prior.sum())
+        if not state.moments.get("lm_done"):
+            state = levenberg_marquardt(evaluate, state, n_res, settings.max_iterations,
+                                        settings.rtol, settings.atol, iteration_done)
+            state.moments["lm_done"] = True
+
+        def fresh(z, iteration):  # independent seeds for r and J at every refinement step
+            base = settings.seed + 10_000 * iteration
+            return evaluate(z, iteration, seeds=(base + 1, base + 2))
+
+        state = gauss_newton_refinement(fresh, state, settings.refinement_steps,
+                                        on_iteration=iteration_done)
+    else:
+        def gradient(z, iteration):
+            theta, dtheta = vector.to_physical(z), vector.derivative(z)
+            problem = train_problem(schedule_value(settings.downsample_schedule, iteration,
+                                                   settings.downsample))
+            spp = schedule_value(settings.spp_schedule, iteration, settings.spp)
+            seed = settings.seed + 1000 * (iteration + 1)  # fresh noise: unbiased steps
+            if vector.size <= LM_MAX_SCALARS:
+                r, J = problem.residuals(theta, spp, seed, jacobian=True, jacobian_seed=seed + 1)
+                g = J.T @ r
+            else:
+                half, g = problem.gradient(theta, spp, seed)
+                r = np.array([np.sqrt(2 * half)])
+            g = g / sigma ** 2 + np.where(has_prior, (theta - np.nan_to_num(prior_mean)) / prior_sd ** 2, 0.0)
+            rms = float(np.sqrt(np.mean(r ** 2))) if r.size > 1 else float(r[0] / np.sqrt(problem.n_residuals))
+            return rms, g * dtheta
+
+        state = adam(gradient, state, settings.max_iterations, settings.learning_rate,
+                     on_iteration=iteration_done)
+
+    theta = vector.to_physical(state.z)
+    after = _evaluate(full, full.observations, theta, eval_spp, settings.seed + 1)
+    # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
+    problem = train_problem(settings.downsample)
+    r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True)
+    uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None)
+
+    m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)
+    metrics = {key: {"before": m_before[key], "after": m_after[key]} for key in m_before}
+    views = [ViewRenderings(o.name, o.holdout, o.photograph, before[o.name], after[o.name], o.mask)
+             for o in full.observations]
+    history = [{**h, "values": {k: v.tolist() for k, v in vector.split(vector.to_physical(h["z"])).items()}}
+               for h in state.history]
+    return FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty, metrics,
+                     method, state.iteration, counter.renders, counter.samples,
+                     previous_wall + time.perf_counter() - t0, history, views, truth)

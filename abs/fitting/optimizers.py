@@ -1,0 +1,186 @@
+"""The two optimisers of a fit, over the unconstrained vector ``z`` (see ``parameters.py``).
+
+- :func:`levenberg_marquardt`: optimistix's Levenberg-Marquardt on the residual vector, with the
+  renderer's forward-mode Jacobian (``jax_bridge.py``). Second order: few iterations, each
+  costing about ``1 + P`` renders per view; the choice when the parameter count ``P`` is small.
+- :func:`gauss_newton_refinement`: after Levenberg-Marquardt, a few Gauss-Newton steps whose
+  residuals and Jacobian come from independent renders with fresh seeds. Levenberg-Marquardt
+  minimises the squared residual of one fixed noisy render (common random numbers: a smooth,
+  deterministic objective), whose expectation adds the render variance; that variance depends on
+  the parameters (a brighter scene is noisier), which pulls the minimum towards darker
+  renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; its iterates
+  are averaged.
+- :func:`adam`: Adam on stochastic gradients (a new render seed per iteration), with spp and
+  resolution schedules; the choice for many scalars. The result is the average of the last
+  quarter of the iterates, which cancels most of the Monte-Carlo jitter of the final steps.
+
+Both report every iteration to ``on_iteration`` (progress, checkpoints: kept out of here) and can
+start from a saved :class:`OptimizerState`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from abs.fitting.jax_bridge import residual_function
+
+__all__ = ["OptimizerState", "levenberg_marquardt", "gauss_newton_refinement", "adam"]
+
+
+@dataclass
+class OptimizerState:
+    """Where an optimisation stands (JSON-serialisable through :meth:`to_dict`).
+
+    Attributes
+    ----------
+    method : str
+        ``"lm"`` or ``"adam"``.
+    iteration : int
+        Iterations done.
+    z : ndarray
+        Current unconstrained parameters (LM: the last accepted point).
+    history : list of dict
+        One entry per iteration: ``iteration``, ``loss`` (RMSE of the residuals), ``z``.
+    moments : dict
+        Adam's first and second moments (``m``, ``v``) and its iterate sum for averaging.
+    """
+
+    method: str
+    iteration: int
+    z: np.ndarray
+    history: list[dict] = field(default_factory=list)
+    moments: dict[str, list] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        return {"method": self.method, "iteration": self.iteration, "z": list(map(float, self.z)),
+                "history": self.history, "moments": self.moments}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "OptimizerState":
+        return cls(str(d["method"]), int(d["iteration"]), np.asarray(d["z"], np.float64),
+                   list(d.get("history", [])), dict(d.get("moments", {})))
+
+
+Callback = Callable[[OptimizerState], None]
+
+
+def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
+                        state: OptimizerState, n_residuals: int, max_iterations: int,
+                        rtol: float = 1e-4, atol: float = 1e-6,
+                        on_iteration: Callback | None = None) -> OptimizerState:
+    """Minimise ``|r(z)|^2`` with optimistix's Levenberg-Marquardt.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``evaluate(z, iteration) -> (r, J, loss)``: residuals (M,), their Jacobian (M, P) w.r.t.
+        ``z``, and the loss to report (the RMSE of the pixel residuals).
+    state : OptimizerState
+        Start (a resumed run restarts the damping at its last accepted point).
+    rtol, atol : float
+        optimistix's Cauchy termination on steps in ``z`` and on the residual norm.
+    """
+    remaining = max_iterations - state.iteration
+    if remaining <= 0:
+        return state
+    n = state.z.size
+    # optimistix evaluates at the trial point and accepts or rejects it afterwards, so the
+    # accepted point is tracked as the best so far (LM never accepts an increase).
+    best = {"loss": np.inf, "z": state.z.copy()}
+    if state.history:
+        best["loss"] = min(h["loss"] for h in state.history)
+
+    def counted(z):
+        state.iteration += 1
+        r, J, loss = evaluate(z, state.iteration)
+        if loss < best["loss"]:
+            best.update(loss=loss, z=np.array(z))
+        state.z = best["z"]
+        state.history.append({"iteration": state.iteration, "loss": loss,
+                              "z": list(map(float, z))})
+        if on_iteration is not None:
+            on_iteration(state)
+        return r, J
+
+    fn = residual_function(counted, n_residuals, n)
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
+    solution = optx.least_squares(lambda z, args: fn(z), solver, jnp.asarray(state.z, jnp.float64),
+                                  max_steps=remaining, throw=False)
+    final = np.asarray(solution.value, np.float64)
+    # The solver's accepted point is its answer; it equals the best evaluated point unless the
+    # last trial was rejected, in which case both are the same accepted point.
+    state.z = final if np.all(np.isfinite(final)) else best["z"]
+    return state
+
+
+def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
+                            state: OptimizerState, steps: int, max_step: float = 1.0,
+                            on_iteration: Callback | None = None) -> OptimizerState:
+    """Gauss-Newton steps on decorrelated renders; returns the mean of the stepped-to points.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``evaluate(z, iteration) -> (r, J, loss)`` with independent fresh seeds for ``r`` and
+        ``J`` at every call.
+    steps : int
+        Number of steps (each costs one evaluation).
+    max_step : float
+        Largest step in any unconstrained coordinate (typical steps): a noisy Jacobian must not
+        throw the fit far from the Levenberg-Marquardt solution.
+    """
+    points = [np.asarray(p, np.float64) for p in state.moments.get("refinement", [])]
+    z = points[-1] if points else np.array(state.z, np.float64)
+    while len(points) < steps:
+        state.iteration += 1
+        r, J, loss = evaluate(z, state.iteration)
+        state.history.append({"iteration": state.iteration, "loss": float(loss),
+                              "z": list(map(float, z)), "phase": "refinement"})
+        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        z = z + step * min(1.0, max_step / max(float(np.abs(step).max()), 1e-300))
+        points.append(z)
+        state.moments["refinement"] = [p.tolist() for p in points]
+        state.z = np.mean(points, axis=0)
+        if on_iteration is not None:
+            on_iteration(state)
+    return state
+
+
+def adam(gradient: Callable[[np.ndarray, int], tuple[float, np.ndarray]], state: OptimizerState,
+         max_iterations: int, learning_rate: float = 0.05, betas=(0.9, 0.999), eps: float = 1e-8,
+         on_iteration: Callback | None = None) -> OptimizerState:
+    """Adam (Kingma & Ba 2015) on ``gradient(z, iteration) -> (rmse, dL/dz)``.
+
+    Returns the state whose ``z`` is the mean of the iterates of the last quarter of the run.
+    """
+    m = np.asarray(state.moments.get("m", np.zeros_like(state.z)), np.float64)
+    v = np.asarray(state.moments.get("v", np.zeros_like(state.z)), np.float64)
+    tail = np.asarray(state.moments.get("tail_sum", np.zeros_like(state.z)), np.float64)
+    tail_count = int(state.moments.get("tail_count", 0))
+    tail_start = max_iterations - max(1, max_iterations // 4)
+    z = np.array(state.z, np.float64)
+    while state.iteration < max_iterations:
+        loss, g = gradient(z, state.iteration)
+        t = state.iteration + 1
+        m = betas[0] * m + (1 - betas[0]) * g
+        v = betas[1] * v + (1 - betas[1]) * g * g
+        step = learning_rate * (m / (1 - betas[0] ** t)) / (np.sqrt(v / (1 - betas[1] ** t)) + eps)
+        state.history.append({"iteration": t, "loss": float(loss), "z": list(map(float, z))})
+        z = z - step
+        state.iteration = t
+        if t > tail_start:
+            tail += z
+            tail_count += 1
+        state.z = z
+        state.moments = {"m": m.tolist(), "v": v.tolist(), "tail_sum": tail.tolist(),
+                         "tail_count": tail_count}
+        if on_iteration is not None:
+            on_iteration(state)
+    if tail_count:
+        state.z = tail / tail_count
+    return state

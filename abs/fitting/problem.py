@@ -1,0 +1,193 @@
+"""The fitting problem: residuals between renderings and photographs, and their derivatives.
+
+:class:`FitProblem` owns a compiled scene, the compared views and the parameter layout. Its
+residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
+pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite differences:
+
+- :meth:`FitProblem.residuals` with ``jacobian=True`` records one attached render per view and
+  spp batch, then pushes one tangent per parameter scalar through the recorded graph (forward
+  mode). With few scalars (the usual case: absorption, IOR, scale, pose) this costs about one
+  render per scalar and gives the whole Jacobian that Gauss-Newton, Levenberg-Marquardt and the
+  Laplace approximation need.
+- :meth:`FitProblem.gradient` gives the gradient of the loss in one reverse pass, for problems
+  with many scalars (textures, BRDF coefficients), used by Adam.
+
+Renders use a seed per call, so the same ``(theta, seed)`` gives the same image (common random
+numbers): the optimiser then sees a deterministic objective.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from abs.fitting.observations import Observation
+from abs.fitting.parameters import ParameterVector
+from abs.render.compiled import CompiledScene
+
+__all__ = ["FitProblem", "AD_SAMPLES_PER_BATCH"]
+
+# Camera samples recorded per AD pass: the recorded graph grows with it (about 1-2 kB per path on
+# the CPU backend at depth 12), so large AD renders are split into spp batches.
+AD_SAMPLES_PER_BATCH = 1 << 18
+
+
+@dataclass
+class RenderCounter:
+    """How much rendering a fit used."""
+
+    renders: int = 0
+    samples: int = 0
+
+    def add(self, camera, spp: int) -> None:
+        self.renders += 1
+        self.samples += camera.width * camera.height * spp
+
+
+@dataclass
+class FitProblem:
+    """Renderings of ``compiled`` against ``observations`` as functions of ``vector``'s parameters.
+
+    Parameters
+    ----------
+    compiled : CompiledScene
+    vector : ParameterVector
+        The fitted parameters.
+    observations : list of Observation
+        Training views (holdout views are evaluated by the caller, never fitted).
+    clamp : float or None
+        Renderings are clamped to ``[.., clamp]`` before comparison (photographs that saturate at
+        ``clamp``, e.g. 1.0 for low-dynamic-range images); clamped pixels carry no gradient.
+    max_depth : int or None
+        Path length (default: the scene's).
+    """
+
+    compiled: CompiledScene
+    vector: ParameterVector
+    observations: list[Observation]
+    clamp: float | None = None
+    max_depth: int | None = None
+    counter: RenderCounter = field(default_factory=RenderCounter)
+
+    @property
+    def n_residuals(self) -> int:
+        return 3 * sum(o.pixels for o in self.observations)
+
+    # ------------------------------------------------------------- values
+    def set_values(self, theta: np.ndarray) -> None:
+        """Write physical values (detached) into the compiled scene."""
+        for name, value in self.vector.split(theta).items():
+            self.compiled.set(name, value)
+
+    def _attach(self, theta: np.ndarray) -> mi.Float:
+        """Write ``theta`` as one attached Dr.Jit array; returns it."""
+        attached = mi.Float(np.asarray(theta, np.float32))
+        dr.enable_grad(attached)
+        for name, s in self.vector.slices().items():
+            index = dr.arange(mi.UInt32, s.stop - s.start) + s.start
+            self.compiled.set(name, dr.gather(mi.Float, attached, index))
+        return attached
+
+    def _batches(self, camera, spp: int) -> list[int]:
+        per = max(1, min(spp, AD_SAMPLES_PER_BATCH // (camera.width * camera.height)))
+        return [per] * (spp // per) + ([spp % per] if spp % per else [])
+
+    def render(self, observation: Observation, theta: np.ndarray, spp: int, seed: int) -> np.ndarray:
+        """Primal rendering (H, W, 3) of one observation at ``theta``."""
+        self.set_values(theta)
+        with dr.suspend_grad():
+            image = self.compiled.render(observation.camera, spp=spp, seed=seed,
+                                         max_depth=self.max_depth).numpy()
+        self.counter.add(observation.camera, spp)
+        return image.astype(np.float64)
+
+    # ---------------------------------------------------------- residuals
+    def _compare(self, observation: Observation, image: np.ndarray):
+        """Residuals of one view and the mask of residuals that carry derivatives."""
+        clamped = image if self.clamp is None else np.minimum(image, self.clamp)
+        live = np.ones_like(image, bool) if self.clamp is None else image < self.clamp
+        m = observation.mask
+        return (clamped - observation.photograph)[m].ravel(), live[m].ravel()
+
+    def residuals(self, theta: np.ndarray, spp: int, seed: int, jacobian: bool = False,
+                  jacobian_seed: int | None = None):
+        """Residual vector at physical ``theta`` and, optionally, its Jacobian.
+
+        With ``jacobian_seed`` (different from ``seed``) the Jacobian comes from an independent
+        render. Residuals and Jacobian from the same render are correlated through the Monte-Carlo
+        noise, which biases ``J^T r`` (the gradient) towards darker, less noisy renderings;
+        independent renders make ``J^T r`` unbiased.
+
+        Returns
+        -------
+        r : ndarray, shape (M,)
+        J : ndarray, shape (M, P) or None
+            ``d r / d theta`` (physical units), by forward-mode AD through the renderer.
+        """
+        rs, js = [], []
+        for k, obs in enumerate(self.observations):
+            view_seed = seed * 1009 + k * 101
+            if not jacobian:
+                r, _ = self._compare(obs, self.render(obs, theta, spp, view_seed))
+                rs.append(r)
+                continue
+            image, jac = self._render_with_jacobian(
+                obs, theta, spp, view_seed if jacobian_seed is None else jacobian_seed * 1009 + k * 101)
+            if jacobian_seed is not None and jacobian_seed != seed:
+                image = self.render(obs, theta, spp, view_seed)
+            r, live = self._compare(obs, image)
+            rs.append(r)
+            js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
+        return np.concatenate(rs), (np.concatenate(js) if jacobian else None)
+
+    def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int):
+        cam, p = obs.camera, self.vector.size
+        image = np.zeros((cam.height, cam.width, 3))
+        jac = np.zeros((cam.height, cam.width, 3, p))
+        for b, n in enumerate(self._batches(cam, spp)):
+            attached = self._attach(theta)
+            rendered = self.compiled.render(cam, spp=n, seed=seed + b, max_depth=self.max_depth)
+            self.counter.add(cam, n)
+            image += rendered.numpy() * (n / spp)
+            for i in range(p):
+                tangent = np.zeros(p, np.float32)
+                tangent[i] = 1.0
+                dr.set_grad(attached, mi.Float(tangent))
+                # ClearInterior keeps the recorded edges, so the next tangent reuses the graph.
+                dr.forward_to(rendered, flags=dr.ADFlag.ClearInterior)
+                jac[..., i] += dr.grad(rendered).numpy() * (n / spp)
+                dr.clear_grad(rendered)
+            del rendered, attached
+        self.set_values(theta)  # drop the graph
+        return image, jac
+
+    def gradient(self, theta: np.ndarray, spp: int, seed: int) -> tuple[float, np.ndarray]:
+        """Half the sum of squared residuals and its gradient ``J^T r`` w.r.t. ``theta``, by one
+        reverse pass per view and spp batch."""
+        total, grad = 0.0, np.zeros(self.vector.size)
+        for k, obs in enumerate(self.observations):
+            cam, view_seed = obs.camera, seed * 1009 + k * 101
+            batches = self._batches(cam, spp)
+            # The residual weights the image's vector-Jacobian product; with several batches it
+            # needs the full image first (the same seeds reproduce the same samples).
+            image = None if len(batches) == 1 else self.render(obs, theta, spp, view_seed)
+            for b, n in enumerate(batches):
+                attached = self._attach(theta)
+                rendered = self.compiled.render(cam, spp=n, seed=view_seed + b,
+                                                max_depth=self.max_depth)
+                self.counter.add(cam, n)
+                if image is None:
+                    image = rendered.numpy().astype(np.float64)
+                clamped = image if self.clamp is None else np.minimum(image, self.clamp)
+                live = np.ones_like(image, bool) if self.clamp is None else image < self.clamp
+                weight = (clamped - obs.photograph) * (obs.mask[..., None] & live) * (n / spp)
+                dr.backward(dr.sum(rendered.array * mi.Float(weight.astype(np.float32).ravel())))
+                grad += dr.grad(attached).numpy()
+                del rendered, attached
+            r, _ = self._compare(obs, image)
+            total += 0.5 * float(r @ r)
+        self.set_values(theta)
+        return total, grad

@@ -1,0 +1,89 @@
+"""Settings of a fit (what to compare, how to optimise), with defaults for small problems."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["FitSettings", "schedule_value", "parse_schedule"]
+
+# Levenberg-Marquardt's Jacobian costs one forward-mode pass per scalar; beyond this many scalars
+# Adam on reverse-mode gradients is cheaper.
+LM_MAX_SCALARS = 16
+
+
+def parse_schedule(text: str) -> tuple[tuple[int, int], ...]:
+    """``"0:4,10:16"`` -> ``((0, 4), (10, 16))``: from iteration 0 use 4, from 10 use 16."""
+    pairs = []
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        start, _, value = item.partition(":")
+        try:
+            pairs.append((int(start), int(value)))
+        except ValueError:
+            raise ValueError(f"schedule entry {item!r}: expected ITERATION:VALUE (integers)") from None
+    return tuple(sorted(pairs))
+
+
+def schedule_value(schedule: tuple[tuple[int, int], ...], iteration: int, default: int) -> int:
+    """The value of a schedule at ``iteration`` (``default`` before its first entry)."""
+    value = default
+    for start, v in schedule:
+        if iteration >= start:
+            value = v
+    return value
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How a fit compares and optimises.
+
+    Attributes
+    ----------
+    method : {"auto", "lm", "adam"}
+        ``auto``: Levenberg-Marquardt up to ``LM_MAX_SCALARS`` fitted scalars, else Adam.
+    spp : int
+        Samples per pixel of the fitting renders (Adam: unless ``spp_schedule`` says otherwise).
+    downsample : int
+        Compare images box-averaged by this factor (renders at the reduced resolution).
+    clamp : float or None
+        Clamp renderings at this value before comparing (photographs that saturate).
+    max_iterations : int
+        Levenberg-Marquardt evaluations or Adam steps.
+    learning_rate : float
+        Adam's step in the unconstrained coordinates (about ``learning_rate`` typical steps).
+    spp_schedule, downsample_schedule : tuple of (iteration, value)
+        Adam's coarse-to-fine schedules, e.g. ``((0, 4), (20, 16))``.
+    eval_spp : int or None
+        Samples per pixel of the before/after renders of all views (default: the scene's).
+    rtol, atol : float
+        Levenberg-Marquardt's termination tolerances (unconstrained coordinates).
+    refinement_steps : int
+        Gauss-Newton steps on decorrelated renders after Levenberg-Marquardt (removes the bias
+        that Monte-Carlo noise puts into a least-squares fit of one noisy render; 0: none).
+    seed : int
+        Base seed of all renders.
+    """
+
+    method: str = "auto"
+    spp: int = 16
+    downsample: int = 1
+    clamp: float | None = None
+    max_iterations: int = 20
+    learning_rate: float = 0.05
+    spp_schedule: tuple[tuple[int, int], ...] = ()
+    downsample_schedule: tuple[tuple[int, int], ...] = ()
+    eval_spp: int | None = None
+    rtol: float = 1e-4
+    atol: float = 1e-6
+    refinement_steps: int = 4
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.method not in ("auto", "lm", "adam"):
+            raise ValueError(f"method must be auto, lm or adam, not {self.method!r}")
+        if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1:
+            raise ValueError("spp, downsample and max_iterations must be >= 1")
+
+    def resolved_method(self, n_scalars: int) -> str:
+        if self.method != "auto":
+            return self.method
+        return "lm" if n_scalars <= LM_MAX_SCALARS else "adam"
