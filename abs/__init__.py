@@ -9,4 +9,16 @@ from abs.errors import CaptureError, DeviceError, InputError, SceneError
 from abs.scene import load_scene
 
 __version__ = "0.1.0"
-__all__ = ["load_scene", "InputError", "SceneError", "CaptureError", "DeviceError", "__version__"]
+__all__ = ["load_scene", "fit", "scan", "FitSettings", "InputError", "SceneError", "CaptureError",
+           "DeviceError", "__version__"]
+
+_LAZY = {"fit": "abs.fitting", "scan": "abs.fitting", "FitSettings": "abs.fitting"}
+
+
+def __getattr__(name: str):
+    # Fitting imports the renderer (and so starts Mitsuba): only on first use of abs.fit & co.
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'abs' has no attribute {name!r}")

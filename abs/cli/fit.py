@@ -47,11 +47,8 @@ def run(args) -> int:
 
     from abs.fitting import FitSettings, OptimizerState, fit
     from abs.fitting.settings import parse_schedule
-    from abs.io.fit_files import FIT_FILE, load_checkpoint, save_checkpoint, write_json
-    from abs.io.images import write_exr
-    from abs.report import ReportView, write_fit_report
+    from abs.io.fit_files import FIT_FILE, load_checkpoint, save_checkpoint, write_fit_folder
     from abs.scene import load_scene
-    from abs.scene.write import write_scene
 
     settings = FitSettings(
         method=args.method, spp=args.spp, downsample=args.downsample, clamp=args.clamp,
@@ -88,16 +85,9 @@ def run(args) -> int:
                  truth=_truth(args.capture, names or scene.fit_parameters))
     bar.close()
 
-    summary = result.summary()
-    write_json(out / FIT_FILE, summary)
-    write_scene(scene, out / "scene.toml", result.values)
-    (out / "renders").mkdir(exist_ok=True)
-    for view in result.views:
-        write_exr(out / "renders" / f"{view.name}.exr", view.after.astype("float32"))
+    summary = write_fit_folder(out, scene, result, report=not args.no_report)
     if not args.no_report:
-        views = [ReportView(v.name, v.holdout, v.photograph, v.before, v.after) for v in result.views]
-        report = write_fit_report(out / "report", summary, views, result.history)
-        print(f"report: {report}")
+        print(f"report: {out / 'report' / 'report.html'}")
     for name, entry in summary["parameters"].items():
         values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g}"
                            for v, s in zip(entry["value"], entry["stderr"]))

@@ -15,13 +15,13 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    from abs.cli import fit, render, simulate
+    from abs.cli import fit, render, scan, simulate
 
     parser = argparse.ArgumentParser(prog="abs", description="Differentiable analysis by synthesis.")
     parser.add_argument("--variant", help="Mitsuba variant (default: $ABS_VARIANT, else CUDA if "
                                           "usable, else llvm_ad_rgb)")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (fit, render, simulate):
+    for module in (fit, render, scan, simulate):
         module.add_parser(sub)
     return parser
 

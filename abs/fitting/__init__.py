@@ -3,6 +3,7 @@ their Laplace uncertainty, and the per-channel RMSE scans of the seed papers (``
 
 from abs.fitting.fit import FitResult, fit
 from abs.fitting.optimizers import OptimizerState
+from abs.fitting.scan import ScanResult, scan
 from abs.fitting.settings import FitSettings
 
-__all__ = ["fit", "FitResult", "FitSettings", "OptimizerState"]
+__all__ = ["fit", "FitResult", "FitSettings", "OptimizerState", "scan", "ScanResult"]

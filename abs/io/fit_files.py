@@ -21,7 +21,8 @@ from pathlib import Path
 
 from abs.errors import InputError
 
-__all__ = ["write_json", "save_checkpoint", "load_checkpoint", "CHECKPOINT_FILE", "FIT_FILE"]
+__all__ = ["write_json", "save_checkpoint", "load_checkpoint", "write_fit_folder", "CHECKPOINT_FILE",
+           "FIT_FILE"]
 
 CHECKPOINT_FILE = "checkpoint.json"
 FIT_FILE = "fit.json"
@@ -63,3 +64,23 @@ def load_checkpoint(folder: str | Path, identity: dict) -> dict | None:
             raise InputError(path, f"fit.{key}", f"checkpoint was made with {saved.get(key)!r}, this "
                              f"run has {value!r}; use another --out folder or delete the checkpoint")
     return state
+
+
+def write_fit_folder(folder: str | Path, scene, result, report: bool = True) -> dict:
+    """Write a fit's outputs: ``fit.json``, the fitted ``scene.toml``, ``renders/*.exr`` and
+    (unless ``report=False``) ``report/report.html``. Returns the summary (``fit.json``)."""
+    from abs.io.images import write_exr
+    from abs.report import ReportView, write_fit_report
+    from abs.scene.write import write_scene
+
+    folder = Path(folder)
+    summary = result.summary()
+    write_json(folder / FIT_FILE, summary)
+    write_scene(scene, folder / "scene.toml", result.values)
+    (folder / "renders").mkdir(parents=True, exist_ok=True)
+    for view in result.views:
+        write_exr(folder / "renders" / f"{view.name}.exr", view.after.astype("float32"))
+    if report:
+        views = [ReportView(v.name, v.holdout, v.photograph, v.before, v.after) for v in result.views]
+        write_fit_report(folder / "report", summary, views, result.history)
+    return summary

@@ -183,3 +183,23 @@ def plot_correlation(path: Path, names: Sequence[str], matrix: Sequence[Sequence
                         color="white" if abs(c) > 0.6 else "black")
     fig.colorbar(image, ax=ax, label="correlation", shrink=0.8)
     _save(fig, path)
+
+
+def plot_scan(path: Path, summary: Mapping, truth: Sequence[float] | None = None) -> None:
+    """RMSE against the scanned value, one curve per colour channel, minima marked
+    (``summary`` is ``scan.json``)."""
+    fig = Figure(figsize=(6, 4))
+    ax = fig.add_subplot()
+    channels = summary["channels"]
+    colours = ["tab:red", "tab:green", "tab:blue"] if len(channels) == 3 else ["black"]
+    for c, (entry, colour) in enumerate(zip(channels, colours)):
+        label = f"channel {'RGB'[c]}" if len(channels) == 3 else summary["parameter"]
+        ax.plot(entry["values"], entry["rmse"], "o-", color=colour, ms=3, label=label)
+        ax.axvline(summary["minimum"][c], color=colour, lw=1, alpha=0.6)
+        if truth is not None:
+            ax.axvline(truth[c], color=colour, lw=1, ls="--", alpha=0.6)
+    ax.set_xlabel(f"{summary['parameter']} ({summary['unit']})")
+    ax.set_ylabel("RMSE of the channel (linear RGB)")
+    ax.set_title("one-parameter scans (solid: minimum" + (", dashed: truth)" if truth else ")"))
+    ax.legend()
+    _save(fig, path)
