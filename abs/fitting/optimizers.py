@@ -20,6 +20,8 @@ start from a saved :class:`OptimizerState`.
 
 from __future__ import annotations
 
+import queue
+import threading
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -69,6 +71,61 @@ class OptimizerState:
 Callback = Callable[[OptimizerState], None]
 
 
+class _on_calling_thread:
+    """Run a JAX host callback on the thread that started the solve.
+
+    XLA may run host callbacks on its own threads, but Dr.Jit's AD state is per thread (a
+    forward pass started on another thread refuses the graph recorded here). So the solver runs on
+    a helper thread and every callback is posted back to the calling thread, which serves them
+    until the solver returns.
+    """
+
+    _requests: queue.Queue | None = None
+
+    def __init__(self, function):
+        self.function = function
+
+    def __call__(self, *args):
+        requests = type(self)._requests
+        if requests is None:  # no solve in progress: a direct call
+            return self.function(*args)
+        reply: queue.Queue = queue.Queue(maxsize=1)
+        requests.put((self.function, args, reply))
+        ok, value = reply.get()
+        if not ok:
+            raise value
+        return value
+
+    @classmethod
+    def run(cls, solve):
+        cls._requests = requests = queue.Queue()
+        outcome: dict = {}
+
+        def worker():
+            try:
+                outcome["value"] = solve()
+            except BaseException as exc:  # noqa: BLE001 (re-raised on the calling thread)
+                outcome["error"] = exc
+            requests.put(None)
+
+        threading.Thread(target=worker, daemon=True, name="abs-optimistix").start()
+        try:
+            while (item := requests.get()) is not None:
+                function, args, reply = item
+                try:
+                    reply.put((True, function(*args)))
+                except BaseException as exc:  # noqa: BLE001 (handed to the solver thread)
+                    outcome.setdefault("callback_error", exc)
+                    reply.put((False, exc))
+        finally:
+            cls._requests = None
+        if "callback_error" in outcome:
+            raise outcome["callback_error"]
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["value"]
+
+
 def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
                         state: OptimizerState, n_residuals: int, max_iterations: int,
                         rtol: float = 1e-4, atol: float = 1e-6,
@@ -107,10 +164,11 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, 
             on_iteration(state)
         return r, J
 
-    fn = residual_function(counted, n_residuals, n)
+    fn = residual_function(_on_calling_thread(counted), n_residuals, n)
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    solution = optx.least_squares(lambda z, args: fn(z), solver, jnp.asarray(state.z, jnp.float64),
-                                  max_steps=remaining, throw=False)
+    solution = _on_calling_thread.run(
+        lambda: optx.least_squares(lambda z, args: fn(z), solver, jnp.asarray(state.z, jnp.float64),
+                                   max_steps=remaining, throw=False))
     final = np.asarray(solution.value, np.float64)
     # The solver's accepted point is its answer; it equals the best evaluated point unless the
     # last trial was rejected, in which case both are the same accepted point.

@@ -4,11 +4,10 @@
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
 pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite differences:
 
-- :meth:`FitProblem.residuals` with ``jacobian=True`` records one attached render per view and
-  spp batch, then pushes one tangent per parameter scalar through the recorded graph (forward
-  mode). With few scalars (the usual case: absorption, IOR, scale, pose) this costs about one
-  render per scalar and gives the whole Jacobian that Gauss-Newton, Levenberg-Marquardt and the
-  Laplace approximation need.
+- :meth:`FitProblem.residuals` with ``jacobian=True`` pushes one tangent per parameter scalar
+  through an attached render (forward mode). With few scalars (the usual case: absorption, IOR,
+  scale, pose) this costs one render per scalar and gives the whole Jacobian that Gauss-Newton,
+  Levenberg-Marquardt and the Laplace approximation need.
 - :meth:`FitProblem.gradient` gives the gradient of the loss in one reverse pass, for problems
   with many scalars (textures, BRDF coefficients), used by Adam.
 
@@ -148,19 +147,21 @@ class FitProblem:
         image = np.zeros((cam.height, cam.width, 3))
         jac = np.zeros((cam.height, cam.width, 3, p))
         for b, n in enumerate(self._batches(cam, spp)):
-            attached = self._attach(theta)
-            rendered = self.compiled.render(cam, spp=n, seed=seed + b, max_depth=self.max_depth)
-            self.counter.add(cam, n)
-            image += rendered.numpy() * (n / spp)
             for i in range(p):
+                # One attached render per tangent (the same seed, so the same samples): a
+                # recorded graph cannot be traversed twice when parameters are read inside the
+                # BSDFs' virtual calls (Dr.Jit refuses to re-enter their isolated scopes).
+                attached = self._attach(theta)
+                rendered = self.compiled.render(cam, spp=n, seed=seed + b, max_depth=self.max_depth)
+                self.counter.add(cam, n)
+                if i == 0:
+                    image += rendered.numpy() * (n / spp)
                 tangent = np.zeros(p, np.float32)
                 tangent[i] = 1.0
                 dr.set_grad(attached, mi.Float(tangent))
-                # ClearInterior keeps the recorded edges, so the next tangent reuses the graph.
-                dr.forward_to(rendered, flags=dr.ADFlag.ClearInterior)
+                dr.forward_to(rendered)
                 jac[..., i] += dr.grad(rendered).numpy() * (n / spp)
-                dr.clear_grad(rendered)
-            del rendered, attached
+                del rendered, attached
         self.set_values(theta)  # drop the graph
         return image, jac
 

@@ -1,0 +1,161 @@
+"""The pieces of a fit: transforms, the Dr.Jit -> JAX bridge, Laplace, downsampling, Jacobians."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from abs.errors import InputError
+from abs.fitting.laplace import laplace
+from abs.fitting.observations import downsample, downsample_camera, estimate_image_noise
+from abs.fitting.optimizers import OptimizerState, adam, gauss_newton_refinement, levenberg_marquardt
+from abs.fitting.parameters import ParameterVector
+from abs.fitting.settings import parse_schedule, schedule_value
+from abs.io.fit_files import load_checkpoint, save_checkpoint
+from abs.params.names import Parameter
+
+
+def _vector():
+    specs = {
+        "glass.ior": Parameter("glass.ior", 3, "1", 1.0, 3.0, None),
+        "glass.absorption": Parameter("glass.absorption", 3, "1/m", 0.0, np.inf, None),
+        "obj.pose": Parameter("obj.pose", 6, "m, m, m, rad, rad, rad", -np.inf, np.inf, None),
+    }
+    initial = {"glass.ior": [1.5, 1.52, 1.55], "glass.absorption": [0.0, 2.0, 8.0],
+               "obj.pose": [0.0] * 6}
+    return ParameterVector.build(specs, list(specs), initial)
+
+
+def test_transforms_round_trip_stay_in_bounds_and_have_the_right_derivative():
+    v = _vector()
+    z = v.to_unconstrained(v.initial)
+    assert np.allclose(v.to_physical(z), v.initial)
+    assert v.initial[3] > 0  # a start on the bound is moved inside
+    extreme = v.to_physical(np.full(v.size, -50.0))
+    assert np.all(extreme[:3] >= 1.0) and np.all(extreme[3:6] >= 0.0)
+    h = 1e-6
+    fd = (v.to_physical(z + h) - v.to_physical(z - h)) / (2 * h)
+    assert np.allclose(v.derivative(z), fd, rtol=1e-5, atol=1e-9)
+    assert np.allclose(v.step[6:], [0.01] * 3 + [0.05] * 3)  # pose: cm and a few degrees
+    assert v.labels()[0] == "glass.ior[0]" and len(v.labels()) == 12
+
+
+def _linear_problem(seed=0, m=200, noise=0.1):
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(m, 3))
+    truth = np.array([1.0, -2.0, 0.5])
+    y = A @ truth + noise * rng.normal(size=m)
+    return A, y, truth
+
+
+def test_levenberg_marquardt_through_the_jax_bridge_solves_least_squares():
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    seen = []
+    state = levenberg_marquardt(lambda z, it: (A @ z - y, A, 0.0), OptimizerState("lm", 0, np.zeros(3)),
+                                len(y), 20, on_iteration=lambda s: seen.append(s.iteration))
+    assert np.allclose(state.z, exact, atol=1e-6)
+    assert seen == list(range(1, len(seen) + 1)) and len(seen) < 20
+
+
+def test_levenberg_marquardt_reports_errors_of_the_evaluation():
+    def failing(z, it):
+        raise RuntimeError("renderer failed")
+
+    with pytest.raises(RuntimeError, match="renderer failed"):
+        levenberg_marquardt(failing, OptimizerState("lm", 0, np.zeros(2)), 5, 3)
+
+
+def test_refinement_averages_noisy_gauss_newton_steps_to_the_solution():
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    rng = np.random.default_rng(1)
+
+    def noisy(z, it):  # an unbiased but noisy Jacobian, as from an independent render
+        return A @ z - y, A * (1 + 0.05 * rng.normal(size=A.shape)), 0.0
+
+    state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, exact + 0.3), steps=8)
+    assert np.allclose(state.z, exact, atol=0.03)
+
+
+def test_adam_converges_and_resumes_from_its_state():
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+
+    def grad(z, it):
+        r = A @ z - y
+        return float(np.sqrt(np.mean(r ** 2))), A.T @ r / len(y)
+
+    full = adam(grad, OptimizerState("adam", 0, np.zeros(3)), 300, learning_rate=0.05)
+    assert np.allclose(full.z, exact, atol=0.02)
+    saved = {}
+
+    def interrupt(state):
+        if state.iteration == 150:
+            saved.update(json.loads(json.dumps(state.to_dict())))  # as a checkpoint file has it
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        adam(grad, OptimizerState("adam", 0, np.zeros(3)), 300, learning_rate=0.05, on_iteration=interrupt)
+    resumed = adam(grad, OptimizerState.from_dict(saved), 300, learning_rate=0.05)
+    assert np.allclose(resumed.z, full.z, rtol=1e-12, atol=1e-12)
+
+
+def test_laplace_matches_the_linear_gaussian_posterior():
+    A, y, truth = _linear_problem(m=400, noise=0.2)
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    approx = laplace(A @ exact - y, A)
+    sigma2 = np.sum((A @ exact - y) ** 2) / (len(y) - 3)
+    assert np.allclose(approx.covariance, sigma2 * np.linalg.inv(A.T @ A), rtol=1e-8)
+    assert abs(approx.pixel_sigma - 0.2) < 0.03
+    assert np.all(np.abs(exact - truth) < 4 * approx.stderr)
+    # A parameter the data do not see has no standard error (not a made-up one)...
+    blind = laplace(A @ exact - y, np.column_stack([A, np.zeros(len(y))]))
+    assert np.isnan(blind.stderr[3]) and np.all(np.isfinite(blind.stderr[:3]))
+    # ...unless a prior constrains it.
+    prior = laplace(A @ exact - y, np.column_stack([A, np.zeros(len(y))]), np.array([np.inf] * 3 + [0.5]))
+    assert prior.stderr[3] == pytest.approx(0.5)
+
+
+def test_downsampled_camera_sees_the_block_centres():
+    from abs.render.camera import Camera
+
+    K = np.array([[100.0, 0, 31.5], [0, 100.0, 23.5], [0, 0, 1]])
+    cam = Camera(K, np.eye(3), np.zeros(3), 64, 48)
+    low = downsample_camera(cam, 4)
+    point = np.array([0.05, -0.02, 1.0])
+    u, v, w = cam.K @ point
+    ul, vl, wl = low.K @ point
+    # High-resolution pixel x lies in low-resolution pixel x // 4 at (x - 1.5) / 4.
+    assert np.allclose([ul / wl, vl / wl], [(u / w - 1.5) / 4, (v / w - 1.5) / 4])
+    assert (low.width, low.height) == (16, 12)
+    image = np.arange(64 * 48 * 3, dtype=float).reshape(48, 64, 3)
+    assert downsample(image, 4)[1, 2, 0] == image[4:8, 8:12, 0].mean()
+
+
+def test_noise_estimate_of_white_noise():
+    rng = np.random.default_rng(0)
+    ramp = np.linspace(0, 1, 128)[None, :, None] * np.ones((96, 128, 3))
+    assert estimate_image_noise(ramp + 0.05 * rng.normal(size=ramp.shape)) == pytest.approx(0.05, rel=0.05)
+
+
+def test_schedules():
+    s = parse_schedule("10:16, 0:4")
+    assert s == ((0, 4), (10, 16))
+    assert [schedule_value(s, i, 8) for i in (0, 9, 10, 50)] == [4, 4, 16, 16]
+    with pytest.raises(ValueError, match="ITERATION:VALUE"):
+        parse_schedule("ten:4")
+
+
+def test_checkpoint_belongs_to_its_fit(tmp_path):
+    identity = {"scene": "a.toml", "parameters": ["glass.ior"]}
+    save_checkpoint(tmp_path, identity, OptimizerState("lm", 3, np.ones(3)).to_dict())
+    assert OptimizerState.from_dict(load_checkpoint(tmp_path, identity)).iteration == 3
+    with pytest.raises(InputError, match="fit.parameters"):
+        load_checkpoint(tmp_path, {**identity, "parameters": ["glass.absorption"]})
+    (tmp_path / "checkpoint.json").write_text("{broken")
+    with pytest.raises(InputError, match="checkpoint"):
+        load_checkpoint(tmp_path, identity)
+    assert load_checkpoint(tmp_path / "none", identity) is None
