@@ -13,6 +13,9 @@ def add_parser(sub) -> None:
     p.add_argument("capture", type=Path, help="capture folder (cameras.json)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--params", help="comma-separated parameter names (default: the scene's [fit])")
+    p.add_argument("--init", action="append", default=[], metavar="NAME=V[,V...]",
+                   help="start a parameter here instead of at the scene's value (repeatable), "
+                        "e.g. --init glass.absorption=2,2,2")
     p.add_argument("--method", choices=("auto", "lm", "adam"), default="auto",
                    help="Levenberg-Marquardt (few scalars) or Adam (many); auto picks")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of fitting renders")
@@ -42,6 +45,19 @@ def _truth(capture: Path, names) -> dict | None:
     return {n: truth[n] for n in names if n in truth} or None
 
 
+def _initial(items: list[str]) -> dict:
+    from abs.errors import InputError
+
+    out = {}
+    for item in items:
+        name, _, values = item.partition("=")
+        try:
+            out[name.strip()] = [float(v) for v in values.split(",")]
+        except ValueError:
+            raise InputError(None, "--init", f"{item!r}: expected NAME=V[,V...] with numbers") from None
+    return out
+
+
 def run(args) -> int:
     from tqdm import tqdm
 
@@ -58,9 +74,12 @@ def run(args) -> int:
         seed=args.seed)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
+    initial = _initial(args.init)
     identity = {"scene": str(scene.source), "capture": str(args.capture.resolve()),
-                "parameters": list(names or scene.fit_parameters),
-                "settings": json.loads(json.dumps(asdict(settings)))}
+                "parameters": list(names or scene.fit_parameters), "initial": initial,
+                # Extending a fit (more iterations) is a resume, not a different fit.
+                "settings": {k: v for k, v in json.loads(json.dumps(asdict(settings))).items()
+                             if k not in ("max_iterations", "refinement_steps")}}
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     resume = None
@@ -81,7 +100,7 @@ def run(args) -> int:
         bar.update(state.iteration - bar.n)
         bar.set_postfix(rmse=f"{state.history[-1]['loss']:.4g}")
 
-    result = fit(scene, args.capture, names, settings, resume=resume, on_iteration=on_iteration,
+    result = fit(scene, args.capture, names, settings, initial=initial, resume=resume, on_iteration=on_iteration,
                  truth=_truth(args.capture, names or scene.fit_parameters))
     bar.close()
 

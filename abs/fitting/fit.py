@@ -16,6 +16,7 @@ from typing import Callable
 
 import numpy as np
 
+from abs.errors import InputError
 from abs.fitting.laplace import LaplaceApproximation, laplace
 from abs.fitting.observations import Observation, estimate_image_noise, observe
 from abs.fitting.optimizers import (OptimizerState, adam, gauss_newton_refinement,
@@ -98,14 +99,16 @@ def prepare(scene, capture, parameters=None):
     capture = load_capture(capture) if isinstance(capture, (str, Path)) else capture
     names = tuple(parameters) if parameters else scene.fit_parameters
     if not names:
-        raise ValueError(f"{scene.source}: no parameters to fit (give them, or list them in the "
-                         "scene's [fit] parameters)")
+        raise InputError(scene.source, "fit.parameters", "no parameters to fit (give them, or list "
+                                                         "them in the scene's [fit] parameters)")
     compiled = compile_scene(scene)
     for name in names:
         if name not in compiled.specs:
-            raise KeyError(f"unknown parameter {name!r}; known: {', '.join(sorted(compiled.specs))}")
+            raise InputError(None, "parameters", f"unknown parameter {name!r}; known: "
+                                                 f"{', '.join(sorted(compiled.specs))}")
     if not capture.train_views:
-        raise ValueError(f"{capture.folder}: every view is a holdout view; nothing to fit")
+        raise InputError(capture.folder / "cameras.json", "views",
+                         "every view is a holdout view; nothing to fit")
     return scene, compiled, capture, names
 
 
@@ -129,7 +132,7 @@ def _metrics(observations, renders) -> dict[str, float]:
 
 
 def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
-        resume: OptimizerState | None = None,
+        initial: dict[str, object] | None = None, resume: OptimizerState | None = None,
         on_iteration: Callable[[OptimizerState], None] | None = None,
         truth: dict[str, list] | None = None) -> FitResult:
     """Fit scene parameters to a capture's training views.
@@ -144,6 +147,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         Parameter names (``glass.absorption``, ``environment.scale``, ``sphere.pose``...);
         default: the scene's ``[fit] parameters``.
     settings : FitSettings
+    initial : dict, optional
+        Starting values by parameter name, instead of the scene file's.
     resume : OptimizerState, optional
         Continue an interrupted fit (from its checkpoint).
     on_iteration : callable, optional
@@ -158,6 +163,13 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     t0 = time.perf_counter()
     scene, compiled, capture, names = prepare(scene, capture, parameters)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
+    for name, value in (initial or {}).items():
+        if name not in names:
+            raise InputError(None, "initial", f"{name!r} is not among the fitted parameters {names}")
+        try:
+            compiled.set(name, np.asarray(value, np.float64))
+        except ValueError as exc:
+            raise InputError(None, f"initial.{name}", str(exc)) from None
     vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
     method = settings.resolved_method(vector.size)
     if resume is not None and (resume.method != method or resume.z.size != vector.size):
@@ -217,10 +229,10 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
             return r, J, loss
 
         n_res = problem.n_residuals + int(has_prior.sum())
-        if not state.moments.get("lm_done"):
+        # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
+        if not state.moments.get("lm_converged") and not state.moments.get("refinement"):
             state = levenberg_marquardt(evaluate, state, n_res, settings.max_iterations,
                                         settings.rtol, settings.atol, iteration_done)
-            state.moments["lm_done"] = True
 
         def fresh(z, iteration):  # independent seeds for r and J at every refinement step
             base = settings.seed + 10_000 * iteration

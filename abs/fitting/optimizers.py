@@ -170,6 +170,7 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, 
         lambda: optx.least_squares(lambda z, args: fn(z), solver, jnp.asarray(state.z, jnp.float64),
                                    max_steps=remaining, throw=False))
     final = np.asarray(solution.value, np.float64)
+    state.moments["lm_converged"] = bool(solution.result == optx.RESULTS.successful)
     # The solver's accepted point is its answer; it equals the best evaluated point unless the
     # last trial was rejected, in which case both are the same accepted point.
     state.z = final if np.all(np.isfinite(final)) else best["z"]

@@ -1,0 +1,83 @@
+"""``abs fit`` and ``abs scan`` from the command line: outputs (public contract), resume, errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from abs import load_scene
+from abs.cli.main import main
+from abs.simulate import simulate_capture
+
+
+@pytest.fixture(scope="module")
+def capture(small_scene_dir, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fit_cli") / "capture"
+    scene = load_scene(small_scene_dir / "scene.toml")
+    simulate_capture(scene, folder, n_cameras=3, width=40, height=30, spp=128, read_noise=0.003, seed=4)
+    return folder
+
+
+def _fit(small_scene_dir, capture, out, *extra):
+    return main(["fit", str(small_scene_dir / "scene.toml"), str(capture), "--out", str(out),
+                 "--params", "environment.scale", "--init", "environment.scale=1.4", "--spp", "8",
+                 "--eval-spp", "8", *extra])
+
+
+def test_fit_writes_the_contract_files(small_scene_dir, capture, tmp_path):
+    out = tmp_path / "fit"
+    assert _fit(small_scene_dir, capture, out, "--max-iterations", "6", "--refinement-steps", "2") == 0
+    summary = json.loads((out / "fit.json").read_text())
+    entry = summary["parameters"]["environment.scale"]
+    assert set(entry) >= {"value", "stderr", "unit", "initial", "truth"}
+    assert entry["initial"] == [pytest.approx(1.4)] and entry["truth"] == [pytest.approx(1.0)]
+    assert abs(entry["value"][0] - 1.0) < 0.05 and entry["stderr"][0] > 0
+    for key in ("train_rmse", "holdout_rmse", "train_ssim", "holdout_ssim"):
+        assert summary[key]["after"] < summary[key]["before"] or key.endswith("ssim")
+    assert summary["holdout_rmse"]["after"] < summary["holdout_rmse"]["before"]
+    assert summary["renders"] > 0 and summary["samples_rendered"] > 0 and summary["wall_s"] > 0
+    assert summary["iterations"] >= 3 and summary["method"] == "lm"
+    assert summary["correlation"]["names"] == ["environment.scale"]
+    fitted = load_scene(out / "scene.toml")  # loadable, assets re-rooted, value replaced
+    assert fitted.environment.scale == pytest.approx(entry["value"][0])
+    html = (out / "report" / "report.html").read_text()
+    assert "environment.scale" in html and "holdout" in html
+    assert sorted(p.name for p in (out / "renders").iterdir()) == ["v0.exr", "v1.exr", "v2.exr"]
+
+
+def test_an_interrupted_fit_resumes_where_it_stopped(small_scene_dir, capture, tmp_path):
+    out = tmp_path / "fit"
+    assert _fit(small_scene_dir, capture, out, "--max-iterations", "2", "--refinement-steps", "0",
+                "--no-report") == 0
+    first = json.loads((out / "checkpoint.json").read_text())["state"]
+    assert first["iteration"] == 2
+    assert _fit(small_scene_dir, capture, out, "--max-iterations", "5", "--refinement-steps", "0",
+                "--no-report", "--resume") == 0
+    state = json.loads((out / "checkpoint.json").read_text())["state"]
+    assert state["history"][:2] == first["history"]  # the first two iterations were kept, not redone
+    assert state["iteration"] > 2
+    # A checkpoint of a different fit is refused, naming what differs.
+    assert main(["fit", str(small_scene_dir / "scene.toml"), str(capture), "--out", str(out),
+                 "--params", "glass.absorption", "--resume"]) == 2
+
+
+def test_fit_errors_name_the_problem(small_scene_dir, capture, tmp_path, capsys):
+    assert main(["fit", str(small_scene_dir / "scene.toml"), str(capture), "--out", str(tmp_path),
+                 "--params", "glass.colour"]) == 2
+    assert "unknown parameter 'glass.colour'" in capsys.readouterr().err
+    assert _fit(small_scene_dir, capture, tmp_path, "--init", "environment.scale=x") == 2
+    assert "--init" in capsys.readouterr().err
+
+
+def test_scan_finds_the_environment_scale(small_scene_dir, capture, tmp_path):
+    out = tmp_path / "scan"
+    assert main(["scan", str(small_scene_dir / "scene.toml"), str(capture), "--param",
+                 "environment.scale", "--range", "0.7,1.3", "--points", "7", "--spp", "16",
+                 "--downsample", "1", "--out", str(out)]) == 0
+    summary = json.loads((out / "scan.json").read_text())
+    assert abs(summary["minimum"][0] - 1.0) < 0.08
+    assert len(summary["channels"][0]["rmse"]) == 7 and (out / "scan.png").stat().st_size > 0
+    rmse = np.array(summary["channels"][0]["rmse"])
+    assert rmse[0] > rmse.min() < rmse[-1]
