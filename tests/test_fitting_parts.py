@@ -159,3 +159,20 @@ def test_checkpoint_belongs_to_its_fit(tmp_path):
     with pytest.raises(InputError, match="checkpoint"):
         load_checkpoint(tmp_path, identity)
     assert load_checkpoint(tmp_path / "none", identity) is None
+
+
+def test_a_downsampled_camera_renders_the_box_average_of_the_fine_image(small_scene_dir):
+    from abs import load_scene
+    from abs.render import Camera, compile_scene
+    from abs.simulate import place_cameras
+
+    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
+    view = place_cameras(compiled, 1, 48, 36)[0]
+    fine = Camera(view["K"], view["R"], view["t"], 48, 36)
+    coarse = downsample_camera(fine, 3)
+    assert coarse.block == 3
+    expected = downsample(compiled.render(fine, spp=256, seed=1).numpy(), 3)
+    got = compiled.render(coarse, spp=2304, seed=2).numpy()
+    plain = compiled.render(Camera(coarse.K, coarse.R, coarse.t, 16, 12), spp=2304, seed=2).numpy()
+    err, err_plain = np.sqrt(np.mean((got - expected) ** 2)), np.sqrt(np.mean((plain - expected) ** 2))
+    assert err < 0.6 * err_plain, (err, err_plain)  # the plain tent filter blurs differently

@@ -32,6 +32,9 @@ class Camera:
         World-to-camera translation in metres.
     width, height : int
         Image size in pixels.
+    block : int
+        Each pixel is the average of ``block`` x ``block`` pixels of a finer image (a camera
+        downsampled for comparison with box-averaged photographs); 1 for an ordinary camera.
     """
 
     K: np.ndarray
@@ -39,6 +42,7 @@ class Camera:
     t: np.ndarray
     width: int
     height: int
+    block: int = 1
 
     @classmethod
     def from_view(cls, view) -> "Camera":

@@ -107,6 +107,16 @@ class PathTracer:
         offset = sampler.next_2d()
         dx = mi.warp.interval_to_tent(offset.x)
         dy = mi.warp.interval_to_tent(offset.y)
+        if camera.block > 1:
+            # A pixel of a downsampled camera is the box average of block x block fine pixels,
+            # each with its tent filter: pick a fine pixel, then a tent offset of its size.
+            if moving:
+                raise NotImplementedError("pose gradients (edge sampling) need block == 1: fit "
+                                          "poses without --downsample")
+            b = camera.block
+            pick = dr.floor(sampler.next_2d() * b)
+            dx = (pick.x - (b - 1) / 2 + dx) / b
+            dy = (pick.y - (b - 1) / 2 + dy) / b
         origin, d = camera.rays(px + dx, py + dy)
         # The ray time carries the colour channel of this pass to abs_dielectric (see there).
         ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
