@@ -8,8 +8,8 @@
   minimises the squared residual of one fixed noisy render (common random numbers: a smooth,
   deterministic objective), whose expectation adds the render variance; that variance depends on
   the parameters (a brighter scene is noisier), which pulls the minimum towards darker
-  renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; its iterates
-  are averaged.
+  renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; the later
+  half of its iterates is averaged.
 - :func:`adam`: Adam on stochastic gradients (a new render seed per iteration), with spp and
   resolution schedules; the choice for many scalars. The result is the average of the last
   quarter of the iterates, which cancels most of the Monte-Carlo jitter of the final steps.
@@ -180,7 +180,8 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, 
 def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
                             state: OptimizerState, steps: int, max_step: float = 1.0,
                             on_iteration: Callback | None = None) -> OptimizerState:
-    """Gauss-Newton steps on decorrelated renders; returns the mean of the stepped-to points.
+    """Gauss-Newton steps on decorrelated renders; returns the mean of the later half of the
+    stepped-to points.
 
     Parameters
     ----------
@@ -204,7 +205,8 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple[np.ndarr
         z = z + step * min(1.0, max_step / max(float(np.abs(step).max()), 1e-300))
         points.append(z)
         state.moments["refinement"] = [p.tolist() for p in points]
-        state.z = np.mean(points, axis=0)
+        # Average the later half: the first steps are still travelling from the biased start.
+        state.z = np.mean(points[len(points) // 2:], axis=0)
         if on_iteration is not None:
             on_iteration(state)
     return state
