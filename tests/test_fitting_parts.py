@@ -176,3 +176,26 @@ def test_a_downsampled_camera_renders_the_box_average_of_the_fine_image(small_sc
     plain = compiled.render(Camera(coarse.K, coarse.R, coarse.t, 16, 12), spp=2304, seed=2).numpy()
     err, err_plain = np.sqrt(np.mean((got - expected) ** 2)), np.sqrt(np.mean((plain - expected) ** 2))
     assert err < 0.6 * err_plain, (err, err_plain)  # the plain tent filter blurs differently
+
+
+@pytest.mark.slow
+def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_scene_dir, tmp_path):
+    from abs.fitting.fit import prepare
+    from abs.fitting.observations import observe
+    from abs.fitting.problem import FitProblem
+    from abs.simulate import simulate_capture
+
+    from abs import load_scene
+
+    scene = load_scene(small_scene_dir / "scene.toml")
+    capture = simulate_capture(scene, tmp_path / "capture", n_cameras=2, width=24,
+                               height=18, spp=32, n_holdout=0, seed=5)
+    names = ["environment.scale", "glass.absorption"]
+    _, compiled, capture, _ = prepare(scene, capture, names)
+    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    problem = FitProblem(compiled, vector, [observe(v) for v in capture.train_views], clamp=0.9)
+    theta = vector.initial * np.array([1.2, 0.7, 1.3, 0.9])  # away from the truth: r is not noise
+    r, J = problem.residuals(theta, 4, seed=3, jacobian=True, jacobian_seed=8)
+    half, g = problem.gradient(theta, 4, seed=3, jacobian_seed=8)
+    assert half == pytest.approx(0.5 * r @ r, rel=1e-6)
+    assert np.allclose(g, J.T @ r, rtol=2e-3, atol=1e-4 * np.abs(J.T @ r).max())

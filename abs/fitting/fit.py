@@ -251,7 +251,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                 r, J = problem.residuals(theta, spp, seed, jacobian=True, jacobian_seed=seed + 1)
                 g = J.T @ r
             else:
-                half, g = problem.gradient(theta, spp, seed)
+                half, g = problem.gradient(theta, spp, seed, jacobian_seed=seed + 1)
                 r = np.array([np.sqrt(2 * half)])
             g = g / sigma ** 2 + np.where(has_prior, (theta - np.nan_to_num(prior_mean)) / prior_sd ** 2, 0.0)
             rms = float(np.sqrt(np.mean(r ** 2))) if r.size > 1 else float(r[0] / np.sqrt(problem.n_residuals))

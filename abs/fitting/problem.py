@@ -8,8 +8,8 @@ pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite 
   through an attached render (forward mode). With few scalars (the usual case: absorption, IOR,
   scale, pose) this costs one render per scalar and gives the whole Jacobian that Gauss-Newton,
   Levenberg-Marquardt and the Laplace approximation need.
-- :meth:`FitProblem.gradient` gives the gradient of the loss in one reverse pass, for problems
-  with many scalars (textures, BRDF coefficients), used by Adam.
+- :meth:`FitProblem.gradient` gives the same ``J^T r`` by one reverse pass (plus one primal
+  render for ``r``), for problems with many scalars (textures, BRDF coefficients), used by Adam.
 
 Renders use a seed per call, so the same ``(theta, seed)`` gives the same image (common random
 numbers): the optimiser then sees a deterministic objective.
@@ -104,10 +104,15 @@ class FitProblem:
         return image.astype(np.float64)
 
     # ---------------------------------------------------------- residuals
+    def _clamp(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The image as compared, and where it carries derivatives (not clamped)."""
+        if self.clamp is None:
+            return image, np.ones_like(image, bool)
+        return np.minimum(image, self.clamp), image < self.clamp
+
     def _compare(self, observation: Observation, image: np.ndarray):
         """Residuals of one view and the mask of residuals that carry derivatives."""
-        clamped = image if self.clamp is None else np.minimum(image, self.clamp)
-        live = np.ones_like(image, bool) if self.clamp is None else image < self.clamp
+        clamped, live = self._clamp(image)
         m = observation.mask
         return (clamped - observation.photograph)[m].ravel(), live[m].ravel()
 
@@ -165,30 +170,31 @@ class FitProblem:
         self.set_values(theta)  # drop the graph
         return image, jac
 
-    def gradient(self, theta: np.ndarray, spp: int, seed: int) -> tuple[float, np.ndarray]:
+    def gradient(self, theta: np.ndarray, spp: int, seed: int,
+                 jacobian_seed: int) -> tuple[float, np.ndarray]:
         """Half the sum of squared residuals and its gradient ``J^T r`` w.r.t. ``theta``, by one
-        reverse pass per view and spp batch."""
+        reverse pass per view and spp batch.
+
+        ``r`` comes from the render seeded ``seed`` and ``J`` from the independent renders seeded
+        ``jacobian_seed``, as in :meth:`residuals` (so ``J^T r`` is unbiased); the result equals
+        ``J.T @ r`` of ``residuals(theta, spp, seed, True, jacobian_seed)``.
+        """
         total, grad = 0.0, np.zeros(self.vector.size)
         for k, obs in enumerate(self.observations):
-            cam, view_seed = obs.camera, seed * 1009 + k * 101
-            batches = self._batches(cam, spp)
-            # The residual weights the image's vector-Jacobian product; with several batches it
-            # needs the full image first (the same seeds reproduce the same samples).
-            image = None if len(batches) == 1 else self.render(obs, theta, spp, view_seed)
-            for b, n in enumerate(batches):
-                attached = self._attach(theta)
-                rendered = self.compiled.render(cam, spp=n, seed=view_seed + b,
-                                                max_depth=self.max_depth)
-                self.counter.add(cam, n)
-                if image is None:
-                    image = rendered.numpy().astype(np.float64)
-                clamped = image if self.clamp is None else np.minimum(image, self.clamp)
-                live = np.ones_like(image, bool) if self.clamp is None else image < self.clamp
-                weight = (clamped - obs.photograph) * (obs.mask[..., None] & live) * (n / spp)
-                dr.backward(dr.sum(rendered.array * mi.Float(weight.astype(np.float32).ravel())))
-                grad += dr.grad(attached).numpy()
-                del rendered, attached
+            cam = obs.camera
+            image = self.render(obs, theta, spp, seed * 1009 + k * 101)
             r, _ = self._compare(obs, image)
             total += 0.5 * float(r @ r)
+            clamped, live = self._clamp(image)
+            residual = (clamped - obs.photograph) * (obs.mask[..., None] & live)
+            weight = mi.Float(residual.astype(np.float32).ravel())
+            for b, n in enumerate(self._batches(cam, spp)):
+                attached = self._attach(theta)
+                rendered = self.compiled.render(cam, spp=n, seed=jacobian_seed * 1009 + k * 101 + b,
+                                                max_depth=self.max_depth)
+                self.counter.add(cam, n)
+                dr.backward(dr.sum(rendered.array * weight) * (n / spp))
+                grad += dr.grad(attached).numpy()
+                del rendered, attached
         self.set_values(theta)
         return total, grad
