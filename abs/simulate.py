@@ -13,7 +13,7 @@ import numpy as np
 from abs.camera.pinhole import intrinsics_from_fov, look_at
 from abs.scene.scene import Scene
 
-__all__ = ["place_cameras", "simulate_capture", "add_sensor_noise"]
+__all__ = ["place_cameras", "simulate_capture", "add_sensor_noise", "read_truth"]
 
 
 def _object_bounds(compiled) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -99,3 +99,13 @@ def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width
               "truth": truth}
     (folder / "simulation.json").write_text(json.dumps(record, indent=2))
     return capture
+
+
+def read_truth(capture: str | Path, names) -> dict[str, list] | None:
+    """True values of ``names`` recorded in a synthetic capture's ``simulation.json``, or ``None``
+    for a real capture (or when none of ``names`` was recorded)."""
+    path = Path(capture) / "simulation.json"
+    if not path.exists():
+        return None
+    known = json.loads(path.read_text()).get("truth", {})
+    return {n: known[n] for n in names if n in known} or None

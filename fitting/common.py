@@ -1,4 +1,4 @@
-"""Shared parts of the fitting recipes: command line, known truth, one fit stage with output.
+"""Shared parts of the fitting recipes: command line, one fit stage with its output.
 
 Not a recipe itself: the scripts next to it import it (Python puts a script's own folder on
 ``sys.path``, so ``import common`` works wherever the script is run from).
@@ -7,11 +7,12 @@ Not a recipe itself: the scripts next to it import it (Python puts a script's ow
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import abs
 from abs.io.fit_files import write_fit_folder
+from abs.report.text import summary_lines
+from abs.simulate import read_truth
 
 
 def parser(doc: str) -> argparse.ArgumentParser:
@@ -22,15 +23,6 @@ def parser(doc: str) -> argparse.ArgumentParser:
     p.add_argument("capture", type=Path, help="capture folder (cameras.json)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     return p
-
-
-def truth(capture: Path, names) -> dict | None:
-    """True values recorded by ``abs simulate`` (synthetic captures only), copied into fit.json."""
-    path = Path(capture) / "simulation.json"
-    if not path.exists():
-        return None
-    known = json.loads(path.read_text()).get("truth", {})
-    return {n: known[n] for n in names if n in known} or None
 
 
 def fit_stage(scene, capture: Path, names: list[str], settings, out: Path) -> dict:
@@ -58,15 +50,8 @@ def fit_stage(scene, capture: Path, names: list[str], settings, out: Path) -> di
 
     print(f"fitting {', '.join(names)} -> {out}", flush=True)
     result = abs.fit(scene, capture, names, settings, on_iteration=progress,
-                     truth=truth(capture, names))
+                     truth=read_truth(capture, names))
     summary = write_fit_folder(out, scene, result)
-    for name, entry in summary["parameters"].items():
-        values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g} (unconstrained)"
-                           for v, s in zip(entry["value"], entry["stderr"]))
-        print(f"{name} = [{values}] {entry['unit']}")
-    for split in ("train", "holdout"):
-        rmse = summary[f"{split}_rmse"]
-        if rmse["before"] is not None:
-            print(f"{split} RMSE {rmse['before']:.4g} -> {rmse['after']:.4g}")
+    print("\n".join(summary_lines(summary)))
     print(f"wrote {out / 'fit.json'} and {out / 'report' / 'report.html'}", flush=True)
     return summary

@@ -41,18 +41,25 @@ def make_checker(path: Path, n: int = 64) -> None:
     cv2.imwrite(str(path), np.dstack([img] * 3))
 
 
-@pytest.fixture(scope="session")
-def small_scene_dir(tmp_path_factory) -> Path:
-    """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""
+def make_sphere_and_floor(root: Path) -> None:
+    """``sphere.ply`` (radius 5 cm, resting on y = 0) and ``floor.ply`` (60 cm square, y = 0)."""
     import trimesh
 
-    root = tmp_path_factory.mktemp("small_scene")
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
     sphere.apply_translation([0, 0.05, 0])
     write_mesh(root / "sphere.ply", sphere)
     floor = trimesh.Trimesh(vertices=[[-0.3, 0, -0.3], [0.3, 0, -0.3], [0.3, 0, 0.3], [-0.3, 0, 0.3]],
                             faces=[[0, 2, 1], [0, 3, 2]], process=False)
     write_mesh(root / "floor.ply", floor)
+
+
+@pytest.fixture(scope="session")
+def small_scene_dir(tmp_path_factory) -> Path:
+    """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""
+    import trimesh
+
+    root = tmp_path_factory.mktemp("small_scene")
+    make_sphere_and_floor(root)
     back = trimesh.Trimesh(vertices=[[-0.3, 0, -0.12], [0.3, 0, -0.12], [0.3, 0.3, -0.12], [-0.3, 0.3, -0.12]],
                            faces=[[0, 1, 2], [0, 2, 3]], process=False)
     back.visual = trimesh.visual.TextureVisuals(uv=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float))

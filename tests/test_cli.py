@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 
 from abs.cli.main import main
 from abs.io.capture import load_capture

@@ -17,7 +17,7 @@ import trimesh
 from abs import load_scene
 from abs.fitting import FitSettings, fit
 from abs.simulate import simulate_capture
-from conftest import make_env, write_mesh
+from conftest import make_env, make_sphere_and_floor, write_mesh
 
 pytestmark = pytest.mark.slow
 
@@ -69,12 +69,7 @@ pose = {pose}
 
 def _assets(root: Path) -> None:
     make_env(root / "env.exr")
-    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
-    sphere.apply_translation([0, 0.05, 0])
-    write_mesh(root / "sphere.ply", sphere)
-    floor = trimesh.Trimesh(vertices=[[-0.3, 0, -0.3], [0.3, 0, -0.3], [0.3, 0, 0.3], [-0.3, 0, 0.3]],
-                            faces=[[0, 2, 1], [0, 3, 2]], process=False)
-    write_mesh(root / "floor.ply", floor)
+    make_sphere_and_floor(root)
     box = trimesh.creation.box(extents=[0.08, 0.05, 0.06])
     box.apply_translation([0, 0.025, 0])
     write_mesh(root / "box.ply", box)

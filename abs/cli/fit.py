@@ -36,15 +36,6 @@ def add_parser(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _truth(capture: Path, names) -> dict | None:
-    """True values recorded by ``abs simulate`` (synthetic captures only)."""
-    path = capture / "simulation.json"
-    if not path.exists():
-        return None
-    truth = json.loads(path.read_text()).get("truth", {})
-    return {n: truth[n] for n in names if n in truth} or None
-
-
 def _initial(items: list[str]) -> dict:
     from abs.errors import InputError
 
@@ -64,6 +55,8 @@ def run(args) -> int:
     from abs.fitting import FitSettings, OptimizerState, fit
     from abs.fitting.settings import parse_schedule
     from abs.io.fit_files import FIT_FILE, load_checkpoint, save_checkpoint, write_fit_folder
+    from abs.report.text import summary_lines
+    from abs.simulate import read_truth
     from abs.scene import load_scene
 
     settings = FitSettings(
@@ -101,19 +94,12 @@ def run(args) -> int:
         bar.set_postfix(rmse=f"{state.history[-1]['loss']:.4g}")
 
     result = fit(scene, args.capture, names, settings, initial=initial, resume=resume, on_iteration=on_iteration,
-                 truth=_truth(args.capture, names or scene.fit_parameters))
+                 truth=read_truth(args.capture, names or scene.fit_parameters))
     bar.close()
 
     summary = write_fit_folder(out, scene, result, report=not args.no_report)
     if not args.no_report:
         print(f"report: {out / 'report' / 'report.html'}")
-    for name, entry in summary["parameters"].items():
-        values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g}"
-                           for v, s in zip(entry["value"], entry["stderr"]))
-        print(f"{name} = [{values}] {entry['unit']}")
-    for split in ("train", "holdout"):
-        m = summary[f"{split}_rmse"]
-        if m["before"] is not None:
-            print(f"{split} RMSE {m['before']:.4g} -> {m['after']:.4g}")
+    print("\n".join(summary_lines(summary)))
     print(f"wrote {out / FIT_FILE}")
     return 0

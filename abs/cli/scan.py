@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 
@@ -27,6 +26,7 @@ def run(args) -> int:
     from abs.fitting import scan
     from abs.io.fit_files import write_json
     from abs.report.figures import plot_scan
+    from abs.simulate import read_truth
 
     grid = None
     if args.range:
@@ -41,9 +41,8 @@ def run(args) -> int:
     bar.close()
     summary = result.summary()
     write_json(args.out / "scan.json", summary)
-    sim = args.capture / "simulation.json"
-    truth = json.loads(sim.read_text())["truth"].get(args.param) if sim.exists() else None
-    plot_scan(args.out / "scan.png", summary, truth)
+    truth = read_truth(args.capture, [args.param])
+    plot_scan(args.out / "scan.png", summary, truth[args.param] if truth else None)
     print(f"{args.param} minima: {', '.join(f'{v:.5g}' for v in result.minimum)} {result.unit}")
     print(f"wrote {args.out / 'scan.json'} and scan.png")
     return 0
