@@ -7,7 +7,11 @@ field, with exit status 2; anything else is a bug and shows its traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
+import pkgutil
 import sys
+
+import abs.cli
 
 from abs.errors import InputError
 
@@ -15,14 +19,15 @@ __all__ = ["main"]
 
 
 def _parser() -> argparse.ArgumentParser:
-    from abs.cli import fit, render, scan, simulate
-
     parser = argparse.ArgumentParser(prog="abs", description="Differentiable analysis by synthesis.")
     parser.add_argument("--variant", help="Mitsuba variant (default: $ABS_VARIANT, else CUDA if "
                                           "usable, else llvm_ad_rgb)")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in (fit, render, scan, simulate):
-        module.add_parser(sub)
+    # A sub-command is a module of this package with ``add_parser``: adding one is adding a file.
+    for info in sorted(pkgutil.iter_modules(abs.cli.__path__), key=lambda m: m.name):
+        module = importlib.import_module(f"abs.cli.{info.name}")
+        if hasattr(module, "add_parser"):
+            module.add_parser(sub)
     return parser
 
 
