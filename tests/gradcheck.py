@@ -17,8 +17,12 @@ from abs.render.integrator import PathTracer
 
 
 def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4, spp=64,
-                         max_depth=4, edges=True):
-    """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``)."""
+                         max_depth=4, edges=True, full=False):
+    """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``).
+
+    ``full``: differentiate ``compiled.render`` (path tracer and ``[sensor]``) rather than the
+    path tracer alone (without Russian roulette at ``max_depth`` <= 5).
+    """
     x0 = compiled.get(name)
     direction = np.asarray(direction, float)
     tracer = PathTracer(max_depth=max_depth, rr_depth=1000)
@@ -28,9 +32,12 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
         if grad:
             dr.enable_grad(value)
         compiled.set(name, value)
-        moving = compiled.moving_meshes() if edges else []
-        image = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, spp, seed,
-                              moving=moving)
+        if full:
+            image = compiled.render(camera, spp=spp, seed=seed, max_depth=max_depth)
+        else:
+            moving = compiled.moving_meshes() if edges else []
+            image = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, spp, seed,
+                                  moving=moving)
         total = dr.sum(image * weights, axis=None)
         if grad:
             dr.backward(total, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)

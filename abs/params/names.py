@@ -1,7 +1,7 @@
 """The catalogue of a scene's differentiable parameters.
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
-``environment.rotation``, ``<object>.pose``. Each has a size (3 for per-channel quantities), a
+``environment.rotation``, ``environment.inverse_distance``, ``sensor.<field>``, ``<object>.pose``. Each has a size (3 for per-channel quantities), a
 unit and physical bounds; fitting code (later) maps bounds to unconstrained variables.
 """
 
@@ -57,7 +57,12 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         "environment.scale": Parameter("environment.scale", 1, "1", 0.0, INF, np.array([env.scale])),
         "environment.rotation": Parameter("environment.rotation", 1, "rad", -INF, INF,
                                           np.array([env.rotation])),
+        "environment.inverse_distance": Parameter("environment.inverse_distance", 1, "1/m", 0.0, INF,
+                                                  np.array([env.inverse_distance])),
     }
+    for field, (size, unit, lower, upper, _) in type(scene.sensor).FIELDS.items():
+        specs[f"sensor.{field}"] = Parameter(f"sensor.{field}", size, unit, lower, upper,
+                                             np.asarray(getattr(scene.sensor, field), np.float64))
     for name, material in scene.materials.items():
         for field, spec in material.parameters().items():
             initial = material.value(field) if spec.size != -1 and field in material._toml else None

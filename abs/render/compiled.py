@@ -26,6 +26,7 @@ from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import opaque
+from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
 __all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
@@ -61,7 +62,9 @@ class CompiledScene:
         self.scene = scene
         self.specs: dict[str, Parameter] = parameter_specs(scene)
         spec = scene.environment
-        self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation)
+        self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
+                                       spec.inverse_distance, spec.center)
+        self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}
@@ -132,6 +135,10 @@ class CompiledScene:
             env.scale = value
         elif name == "environment.rotation":
             env.rotation = value
+        elif name == "environment.inverse_distance":
+            env.inverse_distance = value
+        elif owner == "sensor":
+            setattr(self.sensor, field, value)
         elif field == "pose":
             self._set_pose(owner, value)
         else:
@@ -195,8 +202,9 @@ class CompiledScene:
                max_depth: int | None = None) -> mi.TensorXf:
         """Render ``camera``'s view at the scene's ``[render]`` settings unless overridden.
 
-        Returns a ``TensorXf`` of shape ``(height, width, 3)`` (linear RGB), attached to the AD
-        graph of every parameter set with gradients enabled.
+        Returns a ``TensorXf`` of shape ``(height, width, 3)``: the radiance as the sensor records
+        it (``[sensor]``: vignetting, stray light, response; linear RGB radiance when those are at
+        their null values), attached to the AD graph of every parameter set with gradients enabled.
         """
         tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth)
         spp = spp or self.scene.render.spp
@@ -211,7 +219,7 @@ class CompiledScene:
                                  moving=self.moving_meshes()) * (n / spp)
             image = part if image is None else image + part
             dr.eval(image)
-        return image
+        return self.sensor.apply(image, camera)
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

@@ -10,6 +10,17 @@ angle it covers, then a uniform point inside it. Sampling is detached from the p
 sampled direction is a fixed point of the integration domain; only its radiance is attached), which
 keeps the estimator's gradient unbiased.
 
+Finite distance (``environment.inverse_distance`` = 1/R > 0): the map lies on a sphere of radius
+R around ``center``. Light arriving at a point ``o`` from direction ``d`` left the sphere at
+``o + t d``, so the map is looked up in the direction of that point from the centre (parallax).
+With ``o' = o - center`` and ``b = o'.d`` that direction is
+
+    q = inv * o' + (sqrt(1 - inv^2 (|o'|^2 - b^2)) - inv * b) * d,     inv = 1/R,
+
+which is exactly ``d`` at ``inv = 0`` and has the first-order term ``o' - b d`` (the component of
+``o'`` across the ray), so the derivative with respect to ``inv`` at infinity is not zero.
+Sampling stays in direction space (the pdf of ``d``), so the estimators are unchanged.
+
 Conventions (docs/conventions.md): Mitsuba's orientation, ``u = atan2(x, -z) / 2pi``,
 ``v = acos(y) / pi`` in the map's local frame; column centres at ``u = (i + 0.5) / W`` and row
 centres at ``v = j / (H - 1)``, as Mitsuba's ``envmap`` interpolates.
@@ -30,7 +41,7 @@ def _rotation_y(angle) -> mi.Matrix3f:
 
 
 class Environment:
-    """An HDR lat-long environment map at infinity.
+    """An HDR lat-long environment map, at infinity or on a sphere of finite radius.
 
     Parameters
     ----------
@@ -42,16 +53,22 @@ class Environment:
         Fixed orientation of the map (rotation part used).
     rotation : float
         Extra rotation about world +y in radians (``environment.rotation``).
+    inverse_distance : float
+        1 / radius of the map's sphere in 1/m (``environment.inverse_distance``; 0: at infinity).
+    center : array-like, shape (3,)
+        Centre of that sphere, world metres.
     """
 
     def __init__(self, rgb: np.ndarray, scale: float = 1.0, to_world: np.ndarray | None = None,
-                 rotation: float = 0.0):
+                 rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0)):
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
         self.data = mi.TensorXf(rgb)
         # Opaque so that new values (every fit iteration) do not recompile kernels.
         self.scale = dr.opaque(mi.Float, scale)
         self.rotation = dr.opaque(mi.Float, rotation)
+        self.inverse_distance = dr.opaque(mi.Float, inverse_distance)
+        self.center = mi.Point3f(*[float(c) for c in center])
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m
         self._base = mi.Matrix3f(m[:3, :3].astype(np.float32))
@@ -66,13 +83,27 @@ class Environment:
         return self._to_world(detach).T @ d
 
     # ------------------------------------------------------------- evaluation
-    def eval(self, d: mi.Vector3f, active=True) -> mi.Color3f:
-        """Radiance arriving *from* world direction ``d`` (pointing away from the scene)."""
+    def eval(self, d: mi.Vector3f, active=True, origin: mi.Point3f | None = None) -> mi.Color3f:
+        """Radiance arriving at ``origin`` *from* world direction ``d`` (pointing away from the
+        scene). ``origin`` matters only at a finite distance; ``None`` means the map at infinity."""
+        if origin is not None:
+            d = self.hit_direction(origin, d)
         v = dr.normalize(self.to_local(d))
         u = dr.atan2(v.x, -v.z) * dr.inv_two_pi
         u = u - dr.floor(u)
         t = dr.safe_acos(v.y) * dr.inv_pi
         return self._bilinear(u, t, active) * self.scale
+
+    def hit_direction(self, origin: mi.Point3f, d: mi.Vector3f) -> mi.Vector3f:
+        """Direction from the centre to where the ray ``origin + t d`` (``d`` unit) leaves the
+        map's sphere; ``d`` itself at infinite distance (see the module docstring)."""
+        inv = self.inverse_distance
+        o = origin - self.center
+        b = dr.dot(o, d)
+        across = dr.squared_norm(o) - dr.square(b)
+        # Clamped: a ray starting outside the sphere and missing it sees the nearest point.
+        root = dr.safe_sqrt(1.0 - dr.square(inv) * across)
+        return inv * o + (root - inv * b) * d
 
     def _bilinear(self, u, t, active) -> mi.Color3f:
         w, h = self.width, self.height

@@ -144,7 +144,7 @@ class PathTracer:
             si = scene.ray_intersect(ray, mi.RayFlags.All, depth == 0, active)
             escaped = active & ~si.is_valid()
             mis = dr.select(prev_delta, 1.0, _mis_power(prev_pdf, env.pdf(ray.d, escaped)))
-            result += dr.select(escaped, beta * env.eval(ray.d, escaped) * mis, 0.0)
+            result += dr.select(escaped, beta * env.eval(ray.d, escaped, ray.o) * mis, 0.0)
             active &= si.is_valid()
             if depth + 1 >= self.max_depth:
                 break
@@ -155,7 +155,7 @@ class PathTracer:
             d_light, pdf_light = env.sample(sampler.next_2d(smooth), smooth)
             visible = smooth & (pdf_light > 0.0) & ~scene.ray_test(si.spawn_ray(d_light), smooth)
             f, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(d_light), visible)
-            contribution = beta * f * env.eval(d_light, visible) * \
+            contribution = beta * f * env.eval(d_light, visible, si.p) * \
                 _mis_power(pdf_light, pdf_bsdf) / dr.select(visible, pdf_light, 1.0)
             result += dr.select(visible, contribution, 0.0)
 

@@ -16,7 +16,7 @@ from abs.errors import SceneError
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
-from abs.scene.scene import EnvironmentSpec, ObjectSpec, Prior, RenderSettings, Scene
+from abs.scene.scene import EnvironmentSpec, ObjectSpec, Prior, RenderSettings, Scene, SensorSpec
 
 __all__ = ["load_scene"]
 
@@ -29,7 +29,7 @@ def _check_name(fields: Fields, key: str, name: str, what: str) -> None:
     if not _NAME.match(name):
         raise fields.error(key, f"{what} name {name!r} must start with a letter or '_' and contain "
                                 "only letters, digits, '_' and '-'")
-    if name in ("environment",):
+    if name in ("environment", "sensor"):
         raise fields.error(key, f"{what} name {name!r} is reserved")
 
 
@@ -54,7 +54,7 @@ def load_scene(path: str | Path) -> Scene:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SceneError(source, "", f"not valid TOML: {exc}") from None
     root = Fields(data, source, "")
-    root.check_known({"render", "environment", "materials", "objects", "fit"})
+    root.check_known({"render", "environment", "sensor", "materials", "objects", "fit"})
 
     render_fields = root.sub("render", required=False) or Fields({}, source, "render")
     render_fields.check_known({"spp", "max_depth"})
@@ -64,13 +64,16 @@ def load_scene(path: str | Path) -> Scene:
     )
 
     env_fields = root.sub("environment")
-    env_fields.check_known({"file", "scale", "to_world", "rotation"})
+    env_fields.check_known({"file", "scale", "to_world", "rotation", "inverse_distance", "center"})
     environment = EnvironmentSpec(
         file=env_fields.file("file", suffixes=_IMAGE_SUFFIXES),
         scale=env_fields.number("scale", 1.0, lower=0.0),
         to_world=env_fields.transform("to_world"),
         rotation=env_fields.number("rotation", 0.0),
+        inverse_distance=env_fields.number("inverse_distance", 0.0, lower=0.0),
+        center=env_fields.array("center", (3,), default=[0.0, 0.0, 0.0]),
     )
+    sensor = _sensor(root.sub("sensor", required=False) or Fields({}, source, "sensor"))
 
     mat_fields = root.sub("materials")
     materials = {}
@@ -115,7 +118,7 @@ def load_scene(path: str | Path) -> Scene:
             pose=fields.array("pose", (6,), default=[0.0] * 6),
         ))
 
-    scene = Scene(source, render, environment, materials, tuple(objects))
+    scene = Scene(source, render, environment, materials, tuple(objects), sensor)
     fit_fields = root.sub("fit", required=False)
     if fit_fields is None:
         return scene
@@ -126,6 +129,14 @@ def load_scene(path: str | Path) -> Scene:
     known = parameter_specs(scene)
     return replace(scene, fit_parameters=_fit_parameters(fit_fields, known),
                    fit_priors=_fit_priors(fit_fields, known))
+
+
+def _sensor(fields: Fields) -> SensorSpec:
+    """``[sensor]``: every field optional, each defaulting to its null value."""
+    fields.check_known(set(SensorSpec.FIELDS))
+    values = {key: fields.vector(key, size, default=null, lower=lower, upper=upper)
+              for key, (size, _, lower, upper, null) in SensorSpec.FIELDS.items()}
+    return SensorSpec(**values)
 
 
 def _fit_parameters(fit_fields: Fields, known: dict) -> tuple[str, ...]:

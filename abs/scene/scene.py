@@ -13,7 +13,7 @@ import numpy as np
 
 from abs.scene.materials.base import Material
 
-__all__ = ["RenderSettings", "EnvironmentSpec", "ObjectSpec", "Prior", "Scene"]
+__all__ = ["RenderSettings", "EnvironmentSpec", "SensorSpec", "ObjectSpec", "Prior", "Scene"]
 
 
 @dataclass(frozen=True)
@@ -26,15 +26,48 @@ class RenderSettings:
 
 @dataclass(frozen=True)
 class EnvironmentSpec:
-    """``[environment]``: a lat-long HDR map at infinity.
+    """``[environment]``: a lat-long HDR map, at infinity unless ``inverse_distance`` > 0.
 
-    ``rotation`` (radians, about world +y) is applied after ``to_world``.
+    ``rotation`` (radians, about world +y) is applied after ``to_world``. With
+    ``inverse_distance`` = 1/R > 0 (1/m) the map lies on a sphere of radius R metres around
+    ``center`` (world, metres), and light from it shows parallax.
     """
 
     file: Path
     scale: float = 1.0
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     rotation: float = 0.0
+    inverse_distance: float = 0.0
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """``[sensor]``: what the camera does to the radiance after the lens (docs/scene-format.md).
+
+    Each field's default is its null value, which leaves the rendering unchanged.
+
+    Attributes
+    ----------
+    vignetting : ndarray, shape (2,)
+        ``[k1, k2]``: the image is multiplied by ``1 + k1 r^2 + k2 r^4``, ``r`` the distance from
+        the principal point in units of the focal length (dimensionless).
+    response : ndarray, shape (3,)
+        Per-channel exponent ``gamma`` of the sensor response ``out = in ** gamma`` (1 = linear).
+    stray_light : ndarray, shape (3,)
+        Veiling glare / ambient offset added to every pixel, per R, G, B, in radiance units.
+    """
+
+    # field: (size, unit, lower, upper, null value); the loader and the parameter catalogue read it.
+    FIELDS = {
+        "vignetting": (2, "1", -2.0, 2.0, 0.0),
+        "response": (3, "1", 0.2, 5.0, 1.0),
+        "stray_light": (3, "radiance", 0.0, float("inf"), 0.0),
+    }
+
+    vignetting: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    response: np.ndarray = field(default_factory=lambda: np.ones(3))
+    stray_light: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)
@@ -97,6 +130,7 @@ class Scene:
     environment: EnvironmentSpec
     materials: dict[str, Material]
     objects: tuple[ObjectSpec, ...]
+    sensor: SensorSpec = field(default_factory=SensorSpec)
     fit_parameters: tuple[str, ...] = ()
     fit_priors: dict[str, Prior] = field(default_factory=dict)
 

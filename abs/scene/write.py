@@ -128,6 +128,11 @@ def _scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
                    "scale": values.get("environment.scale", float(env.scale))}
     _transform(environment, env.to_world)
     environment["rotation"] = values.get("environment.rotation", float(env.rotation))
+    environment["inverse_distance"] = values.get("environment.inverse_distance",
+                                                 float(env.inverse_distance))
+    environment["center"] = np.asarray(env.center, np.float64).tolist()
+    sensor = {key: values.get(f"sensor.{key}", np.asarray(getattr(scene.sensor, key), np.float64).tolist())
+              for key in type(scene.sensor).FIELDS}
 
     objects = []
     for obj in scene.objects:
@@ -139,6 +144,7 @@ def _scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     data = {
         "render": {"spp": int(scene.render.spp), "max_depth": int(scene.render.max_depth)},
         "environment": environment,
+        "sensor": sensor,
         "materials": {name: _material_table(material, folder, values)
                       for name, material in scene.materials.items()},
         "objects": objects,

@@ -1,0 +1,102 @@
+"""The camera sensor applied to rendered radiance: vignetting, stray light and a non-linear response.
+
+Applied to every rendering after the path tracer (in :meth:`CompiledScene.render`), in Dr.Jit, so
+images stay differentiable with respect to the sensor's parameters and to everything upstream.
+The order follows the light: the lens attenuates the image towards its corners (vignetting),
+light scattered inside the lens adds a veil (stray light), then the sensor converts irradiance to
+values (response)::
+
+    out = (V(r) * L + s) ** gamma,     V(r) = 1 + k1 r^2 + k2 r^4
+
+with ``r`` the distance of the point on the image plane from the principal point in units of the
+focal length (OpenCV normalised coordinates). Every operation is exact at its null value
+(``k = 0``: ``L * 1``; ``s = 0``: ``+ 0``; ``gamma = 1``: ``x * exp(0)``), so a sensor at its null
+values returns the rendering bit for bit.
+
+Downsampled cameras (``Camera.block > 1``) compare box averages of fine photograph pixels, each
+vignetted at its own centre; the falloff is linear in ``k``, so the block average of ``r^2`` and
+``r^4`` over the fine pixel centres gives exactly that average.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from abs.render.camera import Camera
+from abs.render.jit import opaque
+
+__all__ = ["Sensor", "radial_moments"]
+
+# Below this value the logarithm in the response is clamped (a black pixel stays black).
+_TINY = 1e-30
+
+
+def radial_moments(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """Block averages of ``r^2`` and ``r^4`` over each pixel's fine pixel centres.
+
+    Parameters
+    ----------
+    camera : Camera
+        A camera, possibly downsampled (``block`` fine pixels per pixel and axis).
+
+    Returns
+    -------
+    r2, r4 : ndarray, shape (height, width)
+        Dimensionless (``r`` in units of the focal length).
+    """
+    b = camera.block
+    # Fine camera: K_fine = S^-1 K (see abs.fitting.observations.downsample_camera).
+    shift = -(b - 1) / (2.0 * b)
+    S = np.array([[1.0 / b, 0.0, shift], [0.0, 1.0 / b, shift], [0.0, 0.0, 1.0]])
+    k_fine = np.linalg.solve(S, camera.K)
+    v, u = np.mgrid[0:camera.height * b, 0:camera.width * b].astype(np.float64)
+    kinv = np.linalg.inv(k_fine)
+    x = kinv[0, 0] * u + kinv[0, 1] * v + kinv[0, 2]
+    y = kinv[1, 0] * u + kinv[1, 1] * v + kinv[1, 2]
+    z = kinv[2, 0] * u + kinv[2, 1] * v + kinv[2, 2]
+    r2 = (x / z) ** 2 + (y / z) ** 2
+
+    def block_mean(a):
+        return a.reshape(camera.height, b, camera.width, b).mean(axis=(1, 3))
+
+    return block_mean(r2), block_mean(r2 * r2)
+
+
+class Sensor:
+    """The sensor's parameters as Dr.Jit arrays (any of them may be attached to the AD graph).
+
+    Parameters
+    ----------
+    vignetting : array-like, shape (2,)
+        ``[k1, k2]`` (dimensionless).
+    response : array-like, shape (3,)
+        Exponent per R, G, B.
+    stray_light : array-like, shape (3,)
+        Offset per R, G, B in radiance units.
+    """
+
+    def __init__(self, vignetting, response, stray_light):
+        self.vignetting = opaque(mi.Float, np.asarray(vignetting, np.float32))
+        self.response = opaque(mi.Float, np.asarray(response, np.float32))
+        self.stray_light = opaque(mi.Float, np.asarray(stray_light, np.float32))
+
+    def apply(self, image: mi.TensorXf, camera: Camera) -> mi.TensorXf:
+        """The sensor's output for rendered radiance ``image`` (height, width, 3) of ``camera``."""
+        h, w = camera.height, camera.width
+        flat = image.array
+        r2, r4 = radial_moments(camera)
+        # One entry per (pixel, channel) lane, in the image's (H, W, 3) memory order.
+        r2 = mi.Float(np.repeat(r2.ravel(), 3).astype(np.float32))
+        r4 = mi.Float(np.repeat(r4.ravel(), 3).astype(np.float32))
+        channel = dr.arange(mi.UInt32, h * w * 3) % 3
+        k1 = dr.gather(mi.Float, self.vignetting, mi.UInt32(0))
+        k2 = dr.gather(mi.Float, self.vignetting, mi.UInt32(1))
+        veiled = flat * (1.0 + k1 * r2 + k2 * r4) + dr.gather(mi.Float, self.stray_light, channel)
+        gamma = dr.gather(mi.Float, self.response, channel)
+        # x ** gamma written as x * x ** (gamma - 1): exactly x at gamma = 1, with the derivative
+        # x log x there, and no NaN at x = 0.
+        log_x = dr.log(dr.maximum(veiled, _TINY))
+        out = veiled * dr.exp((gamma - 1.0) * log_x)
+        return mi.TensorXf(out, (h, w, 3))

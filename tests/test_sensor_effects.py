@@ -1,0 +1,124 @@
+"""The ``[sensor]`` model extensions (vignetting, camera response, stray light): exact at their
+null values, equal to their closed forms, derivatives equal to finite differences, and read,
+validated and written back through the scene file."""
+
+from __future__ import annotations
+
+import re
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from abs.camera.pinhole import intrinsics_from_fov, look_at
+from abs.errors import SceneError
+from abs.fitting.observations import downsample_camera
+from abs.render import Camera, PathTracer, compile_scene
+from abs.render.sensor import radial_moments
+from abs.scene import load_scene, write_scene
+from gradcheck import assert_gradients_agree, directional_gradient
+
+W = H = 24
+SPP = 8
+
+
+@pytest.fixture(scope="module")
+def setup(small_scene_dir):
+    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    K = intrinsics_from_fov(W, H, np.radians(40))
+    K[0, 2] += 1.5  # off-centre principal point: the falloff must centre on it
+    camera = Camera(K, R, t, W, H)
+    weights = mi.TensorXf(np.random.default_rng(0).uniform(0, 1, (H, W, 3)).astype(np.float32))
+    return compiled, camera, weights
+
+
+def _radiance(compiled, camera, seed=3):
+    """The path tracer's image with no sensor applied."""
+    return PathTracer(max_depth=4).render(compiled.mitsuba_scene, compiled.environment, camera,
+                                          SPP, seed).numpy()
+
+
+def _reset(compiled):
+    compiled.set("sensor.vignetting", [0.0, 0.0])
+    compiled.set("sensor.response", [1.0, 1.0, 1.0])
+    compiled.set("sensor.stray_light", [0.0, 0.0, 0.0])
+
+
+def test_null_sensor_is_bitwise_identity(setup):
+    compiled, camera, _ = setup
+    _reset(compiled)
+    for cam in (camera, downsample_camera(Camera(camera.K, camera.R, camera.t, 2 * W, 2 * H), 2)):
+        rendered = compiled.render(cam, spp=SPP, seed=3, max_depth=4).numpy()
+        assert np.array_equal(rendered, _radiance(compiled, cam))
+
+
+def test_sensor_closed_form(setup):
+    compiled, camera, _ = setup
+    k, gamma, offset = [-0.4, 0.2], [0.8, 1.0, 1.3], [0.01, 0.02, 0.0]
+    compiled.set("sensor.vignetting", k)
+    compiled.set("sensor.response", gamma)
+    compiled.set("sensor.stray_light", offset)
+    try:
+        rendered = compiled.render(camera, spp=SPP, seed=3, max_depth=4).numpy()
+    finally:
+        _reset(compiled)
+    # r from the pixel centre's OpenCV normalised coordinates, directly.
+    v, u = np.mgrid[0:H, 0:W]
+    x = (u - camera.K[0, 2]) / camera.K[0, 0]
+    y = (v - camera.K[1, 2]) / camera.K[1, 1]
+    r2 = (x * x + y * y)[..., None]
+    expected = ((1 + k[0] * r2 + k[1] * r2 ** 2) * _radiance(compiled, camera) + offset) ** np.array(gamma)
+    np.testing.assert_allclose(rendered, expected, rtol=2e-5, atol=1e-7)
+
+
+def test_radial_moments_average_fine_pixels(setup):
+    _, camera, _ = setup
+    fine = Camera(camera.K, camera.R, camera.t, 2 * W, 2 * H)
+    coarse = downsample_camera(fine, 2)
+    r2_fine, r4_fine = radial_moments(fine)
+    r2, r4 = radial_moments(coarse)
+    np.testing.assert_allclose(r2, r2_fine.reshape(H, 2, W, 2).mean(axis=(1, 3)), rtol=1e-10)
+    np.testing.assert_allclose(r4, r4_fine.reshape(H, 2, W, 2).mean(axis=(1, 3)), rtol=1e-10)
+
+
+@pytest.mark.parametrize("name, value, direction, h", [
+    ("sensor.vignetting", [0.0, 0.0], [1.0, 0.5], 0.05),
+    ("sensor.vignetting", [-0.3, 0.1], [1.0, -0.5], 0.05),
+    ("sensor.response", [1.0, 1.0, 1.0], [1.0, 0.5, 0.7], 0.02),
+    ("sensor.response", [0.7, 1.2, 1.5], [1.0, 0.5, 0.7], 0.02),
+    ("sensor.stray_light", [0.0, 0.0, 0.0], [1.0, 0.3, 0.6], 0.005),
+    ("sensor.stray_light", [0.05, 0.02, 0.01], [1.0, 0.3, 0.6], 0.005),
+])
+def test_sensor_gradient(setup, name, value, direction, h):
+    """At the null value (what a score test sees) and away from it."""
+    compiled, camera, weights = setup
+    compiled.set(name, value)
+    try:
+        res = directional_gradient(compiled, camera, name, direction, h, weights, seeds=3, spp=4 * SPP,
+                                   full=True)
+    finally:
+        _reset(compiled)
+    assert_gradients_agree(*res, rel=0.02)
+
+
+def test_sensor_fields_round_trip_and_errors(small_scene_dir, tmp_path):
+    scene = load_scene(small_scene_dir / "scene.toml")
+    values = {"sensor.vignetting": [-0.2, 0.05], "sensor.response": [0.9, 1.0, 1.1],
+              "sensor.stray_light": [0.01, 0.0, 0.02]}
+    again = load_scene(write_scene(scene, tmp_path / "written" / "scene.toml", values))
+    for name, value in values.items():
+        np.testing.assert_allclose(getattr(again.sensor, name.split(".")[1]), value)
+
+    text = (small_scene_dir / "scene.toml").read_text()
+    for table, message in [('[sensor]\nresponse = [1.0, 0.1, 1.0]', "sensor.response: all entries must be >= 0.2"),
+                           ('[sensor]\nstray_light = -0.1', "sensor.stray_light: all entries must be >= 0"),
+                           ('[sensor]\nvignetting = [0.1]', "sensor.vignetting: expected shape [2]"),
+                           ('[sensor]\ngamma = 2.2', "sensor.gamma: unknown field")]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text.replace("[materials.glass]", table + "\n\n[materials.glass]"))
+        for asset in ("sphere.ply", "floor.ply", "backdrop.obj", "env.exr", "checker.png"):
+            (tmp_path / asset).write_bytes((small_scene_dir / asset).read_bytes())
+        with pytest.raises(SceneError, match=re.escape(message)) as info:
+            load_scene(bad)
+        assert str(bad) in str(info.value)
