@@ -23,6 +23,21 @@ array              shape        meaning
 ``epsilon``        ()           ε of the mapping, 1/sr, > 0
 ``format_version`` ()           1
 =================  ===========  =========================================================
+
+Optional arrays written by :func:`abs.brdf.pca.build_basis` (describe the training set; used to
+choose the regularisation of :mod:`abs.brdf.reconstruct`):
+
+=========================  =======  ==========================================================
+array                      shape    meaning
+=========================  =======  ==========================================================
+``materials``              (m,)     names of the m training materials (unicode strings)
+``training_coefficients``  (m, K)   coefficients of the training tables (rows of U)
+``singular_values``        (r,)     all singular values Σ of the centred mapped data, descending
+``residual_variance``      ()       per-entry variance of the mapped residual of a material
+                                    outside the training set (leave-one-out estimate)
+=========================  =======  ==========================================================
+
+The format is documented with the rest of the BRDF tools in ``docs/brdf.md``.
 """
 
 from __future__ import annotations
@@ -35,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from abs.errors import InputError
-from abs.io.merl import MERL_SIZE, merl_sample_angles
+from abs.io.merl import MERL_SHAPE, MERL_SIZE, merl_sample_angles
 
 __all__ = [
     "FORMAT_VERSION",
@@ -54,7 +69,7 @@ cosθi·cosθo <= 0; clipping keeps the mapping defined there, and at 1e-3 (the 
 ε) the inverse mapping's ε/w term stays O(1), so reconstruction errors are not blown up."""
 
 _REQUIRED = ("mean", "components", "median", "epsilon", "format_version")
-_OPTIONAL = ("cosine_weight",)
+_OPTIONAL = ("cosine_weight", "materials", "training_coefficients", "singular_values", "residual_variance")
 
 
 def merl_cosine_weight(min_weight: float = COSINE_WEIGHT_MIN) -> np.ndarray:
@@ -147,6 +162,14 @@ class BRDFBasis:
         ε of the mapping, 1/sr, > 0.
     cosine_weight : np.ndarray, optional
         (N,) weights ``w`` > 0; :func:`merl_cosine_weight` when omitted.
+    materials : np.ndarray, optional
+        (m,) names of the training materials.
+    training_coefficients : np.ndarray, optional
+        (m, K) coefficients of the training tables.
+    singular_values : np.ndarray, optional
+        (r,) all singular values of the centred, mapped training data, descending.
+    residual_variance : float, optional
+        Per-entry variance of the mapped out-of-basis residual of a held-out material.
     source : str, optional
         The file the basis came from, used in error messages.
 
@@ -160,6 +183,10 @@ class BRDFBasis:
     median: np.ndarray
     epsilon: float
     cosine_weight: np.ndarray | None = None
+    materials: np.ndarray | None = None
+    training_coefficients: np.ndarray | None = None
+    singular_values: np.ndarray | None = None
+    residual_variance: float | None = None
     source: str | None = field(default=None, repr=False)
     # Dr.Jit copies of the arrays, per Mitsuba variant (filled on first use).
     _device: dict = field(default_factory=dict, init=False, repr=False)
@@ -196,6 +223,35 @@ class BRDFBasis:
         object.__setattr__(self, "components", np.ascontiguousarray(components))
         object.__setattr__(self, "cosine_weight", weight)
         object.__setattr__(self, "epsilon", float(epsilon))
+        self._check_training_set(src, components.shape[0])
+
+    def _check_training_set(self, src: str | None, n_components: int) -> None:
+        """Validate the optional description of the training set."""
+        if self.materials is not None:
+            names = np.asarray(self.materials)
+            if names.ndim != 1 or names.dtype.kind != "U":
+                raise InputError(src, "materials", f"expected a 1-D array of names, got {names.dtype} {names.shape}")
+            object.__setattr__(self, "materials", names)
+        if self.training_coefficients is not None:
+            coeffs = _as_float(src, "training_coefficients", self.training_coefficients)
+            if coeffs.ndim != 2 or coeffs.shape[1] != n_components:
+                raise InputError(src, "training_coefficients",
+                                 f"expected shape (m, {n_components}), got {coeffs.shape}")
+            if self.materials is not None and len(self.materials) != coeffs.shape[0]:
+                raise InputError(src, "training_coefficients",
+                                 f"{coeffs.shape[0]} rows for {len(self.materials)} materials")
+            _check_finite(src, "training_coefficients", coeffs)
+            object.__setattr__(self, "training_coefficients", coeffs)
+        if self.singular_values is not None:
+            sv = np.asarray(self.singular_values, dtype=np.float64)
+            if sv.ndim != 1 or not np.isfinite(sv).all() or (sv < 0).any() or (np.diff(sv) > 0).any():
+                raise InputError(src, "singular_values", "expected finite, non-negative, descending values")
+            object.__setattr__(self, "singular_values", sv)
+        if self.residual_variance is not None:
+            value = np.asarray(self.residual_variance)
+            if value.shape != () or not (np.isfinite(value) and value >= 0):
+                raise InputError(src, "residual_variance", f"expected a finite number >= 0, got {value!r}")
+            object.__setattr__(self, "residual_variance", float(value))
 
     @property
     def n_components(self) -> int:
@@ -242,11 +298,21 @@ class BRDFBasis:
             median=arrays["median"],
             epsilon=arrays["epsilon"],
             cosine_weight=arrays.get("cosine_weight"),
+            materials=arrays.get("materials"),
+            training_coefficients=arrays.get("training_coefficients"),
+            singular_values=arrays.get("singular_values"),
+            residual_variance=arrays.get("residual_variance"),
             source=src,
         )
 
     def save(self, path: str | Path) -> None:
         """Write the basis as an uncompressed ``.npz`` at exactly ``path`` (no suffix added)."""
+        optional = {
+            "materials": self.materials,
+            "training_coefficients": self.training_coefficients,
+            "singular_values": self.singular_values,
+            "residual_variance": None if self.residual_variance is None else np.float64(self.residual_variance),
+        }
         with open(path, "wb") as file:
             np.savez(
                 file,
@@ -256,7 +322,38 @@ class BRDFBasis:
                 cosine_weight=self.cosine_weight,
                 epsilon=np.float64(self.epsilon),
                 format_version=np.int64(FORMAT_VERSION),
+                **{name: value for name, value in optional.items() if value is not None},
             )
+
+    # -- numpy ----------------------------------------------------------------------------------
+    def mapped(self, table: np.ndarray) -> np.ndarray:
+        """A table (``(3, 90, 90, 180)`` or flat, 1/sr) in the basis' mapped space, float64 (N,)."""
+        f = np.asarray(table, dtype=np.float64).reshape(-1)
+        if f.size != MERL_SIZE:
+            raise InputError(None, "table", f"expected {MERL_SIZE} values, got {f.size}")
+        return map_brdf(f, self.median.astype(np.float64), self.cosine_weight.astype(np.float64), self.epsilon)
+
+    def table(self, coefficients: np.ndarray) -> np.ndarray:
+        """numpy counterpart of :func:`table_from_coefficients` (not differentiable).
+
+        Parameters
+        ----------
+        coefficients : np.ndarray
+            K coefficients (dimensionless).
+
+        Returns
+        -------
+        np.ndarray
+            float32 table of shape ``(3, 90, 90, 180)``, BRDF in 1/sr, clamped at 0.
+        """
+        c = np.asarray(coefficients, dtype=np.float64).reshape(-1)
+        if c.size != self.n_components:
+            raise ValueError(f"expected {self.n_components} coefficients (one per component), got {c.size}")
+        x = self.mean.astype(np.float64)
+        for c_k, row in zip(c, self.components):
+            x += c_k * row
+        f = unmap_brdf(x, self.median.astype(np.float64), self.cosine_weight.astype(np.float64), self.epsilon)
+        return np.maximum(f, 0.0).astype(np.float32).reshape(MERL_SHAPE)
 
     # -- Dr.Jit ---------------------------------------------------------------------------------
     def _device_arrays(self) -> dict[str, Any]:

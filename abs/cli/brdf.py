@@ -1,0 +1,101 @@
+"""``abs brdf ...``: the measured-BRDF tools (materials, MERL tables, the PCA basis)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_parser(sub) -> None:
+    from abs.brdf.measured import STUDY_MATERIALS
+    from abs.brdf.pca import DEFAULT_EPSILON
+
+    p = sub.add_parser("brdf", help="measured BRDFs: list materials, export MERL tables, build the PCA basis")
+    commands = p.add_subparsers(dest="brdf_command", required=True)
+    merl_help = "folder of real MERL <name>.binary files (default: the neural fits in the shared data)"
+
+    names = commands.add_parser("materials", help="list the measured materials")
+    names.add_argument("--merl-dir", type=Path, help=merl_help)
+    names.set_defaults(run=run_materials)
+
+    export = commands.add_parser("export", help="write a material's table as a MERL .binary file")
+    export.add_argument("material", help="material name, e.g. blue-rubber")
+    export.add_argument("--out", type=Path, required=True, help="the .binary file to write")
+    export.add_argument("--merl-dir", type=Path, help=merl_help)
+    export.set_defaults(run=run_export)
+
+    build = commands.add_parser("build-basis", help="build the PCA basis (.npz, docs/brdf.md)")
+    build.add_argument("--out", type=Path, required=True, help="basis file to write (.npz)")
+    build.add_argument("--exclude", default=",".join(STUDY_MATERIALS),
+                       help="comma-separated materials held out of the basis (default: the study "
+                            "materials %(default)s); '' holds out none")
+    build.add_argument("--materials", help="comma-separated training materials (default: all not excluded)")
+    build.add_argument("--components", type=int, default=32,
+                       help="number of components K (default %(default)s; at most materials − 1)")
+    build.add_argument("--epsilon", type=float, default=DEFAULT_EPSILON,
+                       help="offset ε of the mapping, 1/sr (default %(default)s)")
+    build.add_argument("--merl-dir", type=Path, help=merl_help)
+    build.set_defaults(run=run_build)
+
+
+def _names(text: str | None) -> list[str]:
+    return [n.strip() for n in (text or "").split(",") if n.strip()]
+
+
+def run_materials(args) -> int:
+    from abs.brdf.measured import measured_material_names
+
+    print("\n".join(measured_material_names(args.merl_dir)))
+    return 0
+
+
+def run_export(args) -> int:
+    from abs.brdf.measured import measured_table
+    from abs.io.merl import write_merl
+
+    _check_known([args.material], args.merl_dir, "material")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_merl(args.out, measured_table(args.material, args.merl_dir))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _check_known(names: list[str], merl_dir: Path | None, option: str) -> list[str]:
+    from abs.brdf.measured import measured_material_names
+    from abs.errors import InputError
+
+    known = measured_material_names(merl_dir)
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise InputError(None, option, f"unknown materials {', '.join(unknown)} "
+                                       "(see `abs brdf materials`)")
+    return known
+
+
+def run_build(args) -> int:
+    from functools import partial
+
+    from tqdm import tqdm
+
+    from abs.brdf.measured import measured_table
+    from abs.brdf.pca import build_basis
+    from abs.errors import InputError
+
+    exclude = _names(args.exclude)
+    known = _check_known(exclude, args.merl_dir, "--exclude")
+    training = _names(args.materials) or known
+    _check_known(training, args.merl_dir, "--materials")
+    training = [n for n in training if n not in exclude]
+    if not 1 <= args.components <= len(training) - 1:
+        raise InputError(None, "--components", f"must be in [1, {len(training) - 1}] for "
+                                               f"{len(training)} training materials")
+    bar = tqdm(total=len(training), desc="tables", unit="material")
+    basis = build_basis(training, partial(measured_table, binary_dir=args.merl_dir), args.components,
+                        epsilon=args.epsilon, on_table=lambda name: bar.update(1))
+    bar.close()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    basis.save(args.out)
+    sv = basis.singular_values
+    kept = float((sv[: args.components] ** 2).sum() / (sv**2).sum())
+    print(f"wrote {args.out}: {args.components} components from {len(training)} materials "
+          f"({100 * kept:.1f} % of the mapped variance; held out: {', '.join(exclude) or 'none'})")
+    return 0
