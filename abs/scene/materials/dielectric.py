@@ -1,4 +1,5 @@
-"""``dielectric``: smooth glass with per-channel IOR and Beer-Lambert absorption (1/m)."""
+"""``dielectric``: glass with per-channel IOR, Beer-Lambert absorption (1/m) and optional surface
+roughness (Beckmann alpha; 0, the default, is exactly the smooth interface)."""
 
 from __future__ import annotations
 
@@ -12,20 +13,22 @@ class Dielectric(Material):
 
     @classmethod
     def from_fields(cls, name: str, fields: Fields) -> "Dielectric":
-        fields.check_known({"type", "ior", "absorption"})
+        fields.check_known({"type", "ior", "absorption", "roughness"})
         self = cls(name)
         self.ior_rgb = fields.rgb("ior", 1.5, lower=1.0, upper=3.0)
         self.absorption_per_m = fields.rgb("absorption", 0.0, lower=0.0)
+        self.roughness = fields.number("roughness", 0.0, lower=0.0, upper=1.0)
         self._toml = {"type": cls.type_name, "ior": self.ior_rgb.tolist(),
-                      "absorption": self.absorption_per_m.tolist()}
+                      "absorption": self.absorption_per_m.tolist(), "roughness": self.roughness}
         return self
 
     def to_mitsuba(self) -> dict:
         return {"type": "abs_dielectric", "ior": self.ior_rgb.tolist(),
-                "absorption": self.absorption_per_m.tolist()}
+                "absorption": self.absorption_per_m.tolist(), "roughness": self.roughness}
 
     def parameters(self) -> dict[str, ParameterSpec]:
         return {
             "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior"),
             "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption"),
+            "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness"),
         }
