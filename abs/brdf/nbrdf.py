@@ -174,16 +174,16 @@ def evaluate_nbrdf(weights: NBRDFWeights, theta_h: np.ndarray, theta_d: np.ndarr
 
 def _build_table(weights: NBRDFWeights) -> np.ndarray:
     theta_h, theta_d, phi_d = merl_sample_angles()
-    table = np.empty(MERL_SHAPE, np.float32)
-    for i in range(MERL_SHAPE[1]):  # one θh slice at a time keeps the hidden layers small
-        f = evaluate_nbrdf(weights, theta_h[i], theta_d[i], phi_d[i])
-        f += evaluate_nbrdf(weights, theta_h[i], theta_d[i], phi_d[i] + np.pi)
-        table[:, i] = 0.5 * np.moveaxis(f, -1, 0)
     # cosθi·cosθo from the half-vector frame (as abs.brdf.basis.merl_cosine_weight).
     along = np.cos(theta_d) * np.cos(theta_h)
     across = np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
-    below = (along + across <= 0) | (along - across <= 0)
-    table[:, below] = 0.0
+    valid = (along + across > 0) & (along - across > 0)
+    table = np.zeros(MERL_SHAPE, np.float32)
+    for i in range(MERL_SHAPE[1]):  # one θh slice at a time keeps the hidden layers small
+        keep = valid[i]
+        th, td, pd = theta_h[i][keep], theta_d[i][keep], phi_d[i][keep]
+        f = evaluate_nbrdf(weights, th, td, pd) + evaluate_nbrdf(weights, th, td, pd + np.pi)
+        table[:, i][:, keep] = 0.5 * f.T
     return table
 
 
