@@ -7,16 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from abs.studies.sl_scanner import PROFILE_ANGLES_DEG, PROFILE_INCIDENCE_DEG
+from abs.studies.sl_scanner import LUMINANCE, PROFILE_ANGLES_DEG, PROFILE_INCIDENCE_DEG
 from abs.studies.sl_tables import markdown_table1, markdown_table2
 
 __all__ = ["plot_profiles", "write_html"]
 
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-
-
 def _luminance(profile) -> np.ndarray:
-    return _LUMINANCE @ np.asarray(profile, float)
+    return LUMINANCE @ np.asarray(profile, float)
 
 
 def plot_profiles(path: Path, material: str, results: dict[str, dict], tasks: list[dict]) -> Path:
@@ -50,9 +47,9 @@ def plot_profiles(path: Path, material: str, results: dict[str, dict], tasks: li
         colours = plt.cm.viridis(np.linspace(0.15, 0.85, max(len(levels), 1)))
         for t, colour in zip(levels, colours):
             r = results.get(t["id"], {})
-            if "profile_mean" not in r:
+            if "profile_luminance_mean" not in r:
                 continue
-            mean, sd = _luminance(r["profile_mean"]), np.abs(_LUMINANCE) @ np.asarray(r["profile_sd"])
+            mean, sd = np.asarray(r["profile_luminance_mean"]), np.asarray(r["profile_luminance_sd"])
             ax.plot(angles, mean, color=colour, lw=1.0, label=f"σ = {t['level']:g}")
             ax.fill_between(angles, np.maximum(mean - 2 * sd, 1e-6), mean + 2 * sd, color=colour, alpha=0.2)
         ax.set_yscale("log")
@@ -60,7 +57,7 @@ def plot_profiles(path: Path, material: str, results: dict[str, dict], tasks: li
         ax.set_title(noise.replace("_", " ") if noise else material)
         ax.legend(fontsize=7)
     axes[0][0].set_ylabel(f"BRDF luminance (1/sr), θi = {PROFILE_INCIDENCE_DEG:g}°")
-    fig.suptitle(f"{material}: in-plane profile (±2 sd over repetitions; sd bound by channel sds)")
+    fig.suptitle(f"{material}: in-plane profile (luminance, mean ± 2 sd over repetitions)")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

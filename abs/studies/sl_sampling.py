@@ -9,8 +9,8 @@ interpolation, and, with ``ωi`` towards the light at distance ``d`` and ``ωo``
 is one BRDF sample (1/sr, per RGB channel). A sample is kept only when the vertex faces both the
 light and the camera (ωi·n > 0, ωo·n > 0: the back-facing test), neither the light nor the camera
 is hidden by the mesh (shadow and visibility rays, Mitsuba's ``ray_test``), it projects inside
-the image, and the four pixels it is interpolated from all hold signal (the scanner's valid-pixel
-mask: on silhouettes and shadow edges the blend would mix in background or unlit pixels).
+the image, and the four pixels it is interpolated from are valid (:func:`valid_pixels`: not next to a
+pixel without signal, so not partly covered by background or unlit surface).
 Everything uses the scanner's estimate (:class:`~abs.studies.sl_noise.ScanEstimate`),
 never the truth, except the images themselves.
 """
@@ -27,7 +27,7 @@ from abs.studies.sl_capture import SURFACE_OFFSET_M, sample_scene
 from abs.studies.sl_noise import ScanEstimate, tangent_frame
 from abs.studies.sl_rig import ScannerRig
 
-__all__ = ["BRDFSamples", "brdf_samples", "bilinear"]
+__all__ = ["BRDFSamples", "brdf_samples", "bilinear", "valid_pixels"]
 
 
 @dataclass(frozen=True)
@@ -56,28 +56,45 @@ class BRDFSamples:
         return int(self.f.shape[0])
 
 
-def bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def valid_pixels(image: np.ndarray) -> np.ndarray:
+    """Pixels whose 3 x 3 neighbourhood all holds signal (some channel > 0), (H, W) bool.
+
+    The scanner's valid-pixel mask: a pixel next to one without signal may be partly covered by
+    background (silhouettes) or unlit surface (shadow edges), so its value is no surface radiance.
+    """
+    signal = np.pad(image.max(axis=2) > 0.0, 1, constant_values=False)
+    h, w = image.shape[:2]
+    valid = np.ones((h, w), bool)
+    for dv in range(3):
+        for du in range(3):
+            valid &= signal[dv:dv + h, du:du + w]
+    return valid
+
+
+def bilinear(image: np.ndarray, u: np.ndarray, v: np.ndarray,
+             valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bilinear lookup of an (H, W, C) image at pixel positions (pixel centres at integers).
 
     Positions must lie in [0, W-1] x [0, H-1]. Returns the values (N, C) and whether all four
-    neighbouring pixels hold signal (some channel > 0): False on silhouette and shadow edges,
-    where the blend mixes in background or unlit pixels.
+    pixels blended are ``valid`` (:func:`valid_pixels` of the image when omitted).
     """
     h, w = image.shape[:2]
+    valid = valid_pixels(image) if valid is None else valid
     u0 = np.clip(np.floor(u).astype(np.int64), 0, max(w - 2, 0))
     v0 = np.clip(np.floor(v).astype(np.int64), 0, max(h - 2, 0))
     fu = (u - u0)[:, None]
     fv = (v - v0)[:, None]
     u1, v1 = np.minimum(u0 + 1, w - 1), np.minimum(v0 + 1, h - 1)
-    corners = [image[v0, u0], image[v0, u1], image[v1, u0], image[v1, u1]]
-    signal = np.logical_and.reduce([c.max(axis=1) > 0.0 for c in corners])
-    top = corners[0] * (1 - fu) + corners[1] * fu
-    bottom = corners[2] * (1 - fu) + corners[3] * fu
-    return top * (1 - fv) + bottom * fv, signal
+    ok = valid[v0, u0] & valid[v0, u1] & valid[v1, u0] & valid[v1, u1]
+    top = image[v0, u0] * (1 - fu) + image[v0, u1] * fu
+    bottom = image[v1, u0] * (1 - fu) + image[v1, u1] * fu
+    return top * (1 - fv) + bottom * fv, ok
 
 
 def _unoccluded(scene: mi.Scene, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """Whether the segments origins -> targets (N, 3) are free of the scene's surfaces."""
+    if not len(origins):  # Dr.Jit aborts on zero-width ray batches
+        return np.zeros(0, bool)
     delta = targets - origins
     dist = np.linalg.norm(delta, axis=1)
     d = delta / dist[:, None]
@@ -106,6 +123,7 @@ def brdf_samples(images: np.ndarray, rig: ScannerRig, estimate: ScanEstimate) ->
     origin = p + n * SURFACE_OFFSET_M
     out_wi, out_wo, out_f = [], [], []
     candidates = 0
+    masks = [[valid_pixels(image) for image in step] for step in images]
     for k, angle in enumerate(rig.turntable_angles):
         light = rig.light_at_step(angle, estimate.light_position)
         to_light = light - p
@@ -129,7 +147,7 @@ def brdf_samples(images: np.ndarray, rig: ScannerRig, estimate: ScanEstimate) ->
             idx = idx[_unoccluded(occluder, origin[idx], np.broadcast_to(centre, (len(idx), 3)))]
             if not len(idx):
                 continue
-            radiance, signal = bilinear(images[k, c], u[idx], v[idx])
+            radiance, signal = bilinear(images[k, c], u[idx], v[idx], masks[k][c])
             idx, radiance = idx[signal], radiance[signal]
             irradiance = cos_i[idx] * estimate.light_intensity / dist2[idx]
             frame = (tangent[idx], bitangent[idx], n[idx])

@@ -26,9 +26,11 @@ from abs.brdf.measured import STUDY_MATERIALS
 from abs.studies.sl_noise import NOISE_TYPES
 
 __all__ = ["StudyConfig", "study_tasks", "run_task", "task_id", "in_plane_profile",
-           "PROFILE_ANGLES_DEG", "PROFILE_INCIDENCE_DEG"]
+           "PROFILE_ANGLES_DEG", "PROFILE_INCIDENCE_DEG", "LUMINANCE"]
 
 PROFILE_INCIDENCE_DEG = 45.0
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+"""Rec. 709 luminance weights of linear R, G, B (the profiles are plotted as luminance)."""
 PROFILE_ANGLES_DEG = np.arange(-85.0, 85.5, 1.0)
 """Outgoing angles of the in-plane profile, degrees; positive on the mirror side."""
 
@@ -152,7 +154,8 @@ def run_task(task: dict) -> dict:
 
     Result keys: ``id``, ``digest``, ``samples`` (per repetition), ``delta_e_mean`` and
     ``delta_e_sd`` (per repetition: mean and sd of CIEDE2000 over the sphere's pixels),
-    ``profile_mean``/``profile_sd`` (3 x angles, over repetitions), ``profile_truth``, and for
+    ``profile_mean``/``profile_sd`` (3 x angles, over repetitions), the same for luminance
+    (``profile_luminance_mean``/``_sd``), ``profile_truth``, and for
     error-free tasks the Lambertian baseline's ``lambert_delta_e_mean``/``_sd``.
     """
     import abs.render  # noqa: F401  (selects the Mitsuba variant in a fresh worker)
@@ -201,5 +204,8 @@ def run_task(task: dict) -> dict:
         stack = np.asarray(profiles)
         result["profile_mean"] = stack.mean(axis=0).tolist()
         result["profile_sd"] = stack.std(axis=0).tolist()
+        luminance = np.tensordot(stack, LUMINANCE, axes=([1], [0]))
+        result["profile_luminance_mean"] = luminance.mean(axis=0).tolist()
+        result["profile_luminance_sd"] = luminance.std(axis=0).tolist()
     result["profile_truth"] = in_plane_profile(truth).tolist()
     return result
