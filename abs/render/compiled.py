@@ -197,6 +197,18 @@ class CompiledScene:
             out.append(MovingMesh(self._posed[obj.name], edges, edge_faces, faces))
         return out
 
+    def subsurface(self) -> list[tuple]:
+        """``(shape, spread)`` of objects whose material's ``subsurface`` is non-zero or being
+        differentiated, for :class:`PathTracer`; empty at the null value (the plain model)."""
+        out = []
+        shapes = {shape.id(): shape for shape in self.mitsuba_scene.shapes()}
+        for obj in self.scene.objects:
+            value = self.values.get(f"{obj.material}.subsurface")
+            if value is None or not (dr.grad_enabled(value) or float(dr.detach(value)[0]) > 0.0):
+                continue
+            out.append((mi.ShapePtr(shapes[obj.name]), value))
+        return out
+
     # -------------------------------------------------------------- render
     def render(self, camera: Camera, spp: int | None = None, seed: int = 0,
                max_depth: int | None = None) -> mi.TensorXf:
@@ -206,7 +218,8 @@ class CompiledScene:
         it (``[sensor]``: vignetting, stray light, response; linear RGB radiance when those are at
         their null values), attached to the AD graph of every parameter set with gradients enabled.
         """
-        tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth)
+        tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth,
+                            subsurface=self.subsurface())
         spp = spp or self.scene.render.spp
         # Bound the wavefront (samples in flight) so large primal renders fit in memory; each
         # batch gets its own seed and the batches are averaged.

@@ -21,12 +21,15 @@ Pieces:
   under differentiation (detached weights bias gradients whenever a shading frame moves).
 - Visibility: when meshes move (pose), the boundary term of their silhouettes is added by edge
   sampling (:mod:`abs.render.edges`); shadow and refracted silhouettes are not handled.
+- Subsurface spread (``diffuse`` materials' ``subsurface``, see :meth:`PathTracer._spread`): light
+  leaves a diffuse surface at a point displaced from where it arrived by a 2-D Gaussian in the
+  tangent plane, which blurs shading, shadows and caustics on it.
 - Russian roulette from depth ``rr_depth`` on, with detached survival probabilities.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
@@ -55,10 +58,14 @@ class PathTracer:
         Maximum number of path segments (1: environment seen directly).
     rr_depth : int
         Depth from which Russian roulette may end paths.
+    subsurface : list of (ShapePtr, Float)
+        Shapes whose surface spreads light, each with its spread (standard deviation per tangent
+        axis, metres, a width-1 ``Float`` that may be attached to the AD graph).
     """
 
     max_depth: int = 12
     rr_depth: int = 5
+    subsurface: list = field(default_factory=list)
 
     # ---------------------------------------------------------------- public
     def render(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int = 0,
@@ -148,6 +155,9 @@ class PathTracer:
             active &= si.is_valid()
             if depth + 1 >= self.max_depth:
                 break
+            if self.subsurface:
+                si, score = self._spread(scene, si, ray, sampler, active)
+                beta *= score
             bsdf = si.bsdf(ray)
 
             # Next-event estimation towards the environment (smooth lobes only).
@@ -173,3 +183,43 @@ class PathTracer:
                 beta = dr.select(survive, beta / dr.select(q > 0.0, q, 1.0), 0.0)
                 active &= survive
         return result
+
+    def _spread(self, scene, si, ray, sampler, active):
+        """Move the shading point of surfaces with subsurface spread.
+
+        The exit point is ``p + y`` projected back onto the same shape along its normal, with ``y``
+        a Gaussian displacement in the tangent plane of standard deviation ``sigma`` per axis
+        (falls back to ``p`` where the projection leaves the shape, e.g. beyond its edge).
+        ``y`` is drawn detached and ``d/d sigma`` comes from the score function of its density:
+        the returned factor is ``exp(log G(y) - detach(log G(y)))``, 1 in value with the gradient
+        ``d log G / d sigma = (|y|^2 / sigma^2 - 2) / sigma``, which is unbiased even where the
+        moving point crosses shadow or caustic boundaries (a moved point would miss those).
+
+        Returns
+        -------
+        si : SurfaceInteraction3f
+            The exit point's interaction (``wi`` still towards where the path came from).
+        score : Float
+            The score factor (1 in value).
+        """
+        sigma = mi.Float(0.0)
+        for shape, value in self.subsurface:
+            sigma = dr.select(si.shape == shape, value, sigma)
+        spread = active & (sigma > 0.0)
+        u = sampler.next_2d(spread)
+        radius = dr.sqrt(-2.0 * dr.log(dr.maximum(1.0 - u.x, 1e-12)))
+        sin_phi, cos_phi = dr.sincos(dr.two_pi * u.y)
+        s = dr.detach(sigma)
+        frame = dr.detach(si.sh_frame)
+        y = s * radius * (cos_phi * frame.s + sin_phi * frame.t)
+        n = dr.detach(si.n)
+        lift = 3.0 * s * radius + 1e-4
+        probe = mi.Ray3f(dr.detach(si.p) + y + lift * n, -n, 2.0 * lift, ray.time, mi.Color0f())
+        moved = scene.ray_intersect(probe, mi.RayFlags.All, False, spread)
+        ok = spread & moved.is_valid() & (moved.shape == si.shape)
+        moved.wi = moved.to_local(-ray.d)
+        moved.time = si.time
+        safe = dr.select(spread, sigma, 1.0)  # no 0/0 (and NaN adjoints) on other lanes
+        log_density = -dr.squared_norm(y) / (2.0 * dr.square(safe)) - 2.0 * dr.log(safe)
+        score = dr.select(spread, dr.exp(log_density - dr.detach(log_density)), 1.0)
+        return dr.select(ok, moved, si), score
