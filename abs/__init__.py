@@ -9,10 +9,11 @@ from abs.errors import CaptureError, DeviceError, InputError, SceneError
 from abs.scene import load_scene
 
 __version__ = "0.1.0"
-__all__ = ["load_scene", "fit", "scan", "FitSettings", "InputError", "SceneError", "CaptureError",
-           "DeviceError", "__version__"]
+__all__ = ["load_scene", "fit", "scan", "FitSettings", "sample", "SampleSettings", "InputError",
+           "SceneError", "CaptureError", "DeviceError", "__version__"]
 
-_LAZY = {"fit": "abs.fitting", "scan": "abs.fitting", "FitSettings": "abs.fitting"}
+_LAZY = {"fit": "abs.fitting", "scan": "abs.fitting", "FitSettings": "abs.fitting",
+         "sample": "abs.sampling", "SampleSettings": "abs.sampling"}
 
 
 def __getattr__(name: str):

@@ -56,7 +56,8 @@ class EnsembleProgress:
 
 def autocorrelation_time(backend: emcee.backends.Backend) -> np.ndarray:
     """emcee's estimate of tau per parameter (steps), without its "chain too short" error."""
-    return np.asarray(backend.get_autocorr_time(tol=0), np.float64)
+    with np.errstate(invalid="ignore", divide="ignore"):  # NaN for a chain that never moved
+        return np.asarray(backend.get_autocorr_time(tol=0), np.float64)
 
 
 def run_ensemble(log_prob: Callable[[np.ndarray], float], backend: emcee.backends.Backend,
@@ -99,9 +100,9 @@ def run_ensemble(log_prob: Callable[[np.ndarray], float], backend: emcee.backend
         state = np.asarray(initial, np.float64)
 
     def progress(tau, converged=False, reason=None) -> EnsembleProgress:
-        it = backend.iteration
+        it = int(backend.iteration)
         acc = float(np.mean(backend.accepted) / it) if it else 0.0
-        return EnsembleProgress(it, walkers * (it + 1), acc, tau, converged, reason)
+        return EnsembleProgress(it, int(walkers * (it + 1)), acc, tau, converged, reason)
 
     def budget_left() -> int:
         left = max_steps - backend.iteration

@@ -12,10 +12,11 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["inference_data", "write_netcdf", "r_hat"]
+__all__ = ["arviz", "inference_data", "write_netcdf", "r_hat"]
 
 
-def _arviz():
+def arviz():
+    """The ``arviz`` module (imported on first use: it is slow to import)."""
     with warnings.catch_warnings():  # arviz announces its coming refactor on import
         warnings.simplefilter("ignore", FutureWarning)
         import arviz
@@ -26,7 +27,7 @@ def inference_data(chain: np.ndarray, names: Sequence[str], sizes: Sequence[int]
                    log_prob: np.ndarray | None = None):
     """InferenceData from a chain (S, W, P): ``posterior`` has one variable per parameter with
     dims ``(chain=walker, draw=step[, <name>_dim_0=component])``."""
-    arviz = _arviz()
+    az = arviz()
     walkers_first = np.swapaxes(chain, 0, 1)  # (W, S, P)
     posterior, offset = {}, 0
     for name, n in zip(names, sizes):
@@ -34,7 +35,9 @@ def inference_data(chain: np.ndarray, names: Sequence[str], sizes: Sequence[int]
         posterior[name] = block[..., 0] if n == 1 else block
         offset += n
     stats = {"lp": np.swapaxes(log_prob, 0, 1)} if log_prob is not None else None
-    return arviz.from_dict(posterior=posterior, sample_stats=stats)
+    with warnings.catch_warnings():  # "more chains than draws" for short chains: intended
+        warnings.simplefilter("ignore", UserWarning)
+        return az.from_dict(posterior=posterior, sample_stats=stats)
 
 
 def write_netcdf(idata, path: str | Path) -> Path:
@@ -46,5 +49,5 @@ def write_netcdf(idata, path: str | Path) -> Path:
 
 def r_hat(idata, names: Sequence[str]) -> np.ndarray:
     """Rank-normalised split R-hat per scalar (walkers as chains), in ``names`` order."""
-    values = _arviz().rhat(idata)
+    values = arviz().rhat(idata)
     return np.concatenate([np.atleast_1d(np.asarray(values[n])) for n in names])

@@ -75,13 +75,18 @@ class NoiseModel:
     Attributes
     ----------
     photo_variance : ndarray, shape (V,)
-        White-noise variance of each view's photograph (Immerkaer's estimator).
+        Variance of each view's photograph about the noise-free rendering (sensor noise and
+        model error), assumed white.
     render_variance : list of ndarray, each (H, W, 3)
         Monte-Carlo variance of one render at the sampling spp, per pixel and channel.
+    immerkaer_sd : ndarray, shape (V,), optional
+        Immerkaer's white-noise estimate of each photograph, for comparison only (image
+        structure at low resolution inflates it).
     """
 
     photo_variance: np.ndarray
     render_variance: list[np.ndarray]
+    immerkaer_sd: np.ndarray | None = None
 
     def residual_variance(self, masks: list[np.ndarray], renders_averaged: int = 2) -> np.ndarray:
         """Variance of each residual (the order of ``FitProblem.residuals``) when the rendering is
@@ -91,5 +96,8 @@ class NoiseModel:
         return np.concatenate(parts)
 
     def to_dict(self) -> dict:
-        return {"photo_sd": np.sqrt(self.photo_variance).tolist(),
-                "render_sd_median": [float(np.sqrt(np.median(v))) for v in self.render_variance]}
+        out = {"photo_sd": np.sqrt(self.photo_variance).tolist(),
+               "render_sd_median": [float(np.sqrt(np.median(v))) for v in self.render_variance]}
+        if self.immerkaer_sd is not None:
+            out["photo_sd_immerkaer"] = np.asarray(self.immerkaer_sd).tolist()
+        return out

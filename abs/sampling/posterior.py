@@ -135,18 +135,9 @@ class RenderPosterior:
     variant: str | None = None
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
-    @property
-    def renders_per_evaluation(self) -> int:
-        """Two renders per training view."""
-        from abs.io.capture import load_capture
-
-        return 2 * len(load_capture(self.capture).train_views)
-
     def problem(self):
         """This thread's :class:`~abs.fitting.problem.FitProblem` (compiled on first use)."""
-        cache = getattr(_LOCAL, "problems", None)
-        if cache is None:
-            cache = _LOCAL.problems = {}
+        cache = getattr(_LOCAL, "problems", {})
         if self.token not in cache:
             if self.variant:
                 from abs.render.variant import set_variant
@@ -160,10 +151,16 @@ class RenderPosterior:
             scene = Path(self.scene) if isinstance(self.scene, str) else self.scene
             _, compiled, capture, names = prepare(scene, self.capture, self.names)
             vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-            cache[self.token] = FitProblem(compiled, vector, [observe(v, self.downsample)
-                                                              for v in capture.train_views],
-                                           self.clamp)
-        return cache[self.token]
+            self.adopt(FitProblem(compiled, vector, [observe(v, self.downsample)
+                                                     for v in capture.train_views], self.clamp))
+        return _LOCAL.problems[self.token]
+
+    def adopt(self, problem) -> None:
+        """Use an already compiled problem in this thread (saves compiling the scene twice)."""
+        cache = getattr(_LOCAL, "problems", None)
+        if cache is None:
+            cache = _LOCAL.problems = {}
+        cache[self.token] = problem
 
     def residuals(self, theta: np.ndarray) -> list[np.ndarray]:
         """Residuals of the two fixed-seed renders at physical ``theta``."""

@@ -1,0 +1,393 @@
+"""``abs.sample``: the posterior of scene parameters given a capture, by emcee around a fit.
+
+Steps: (1) a point estimate and Laplace standard errors, from ``abs.fit`` or a given fit;
+(2) the noise model at the fit: each photograph's white-noise variance (Immerkaer) and the
+render's per-pixel Monte-Carlo variance from two independent renders at the sampling spp;
+(3) the posterior of :class:`~abs.sampling.posterior.RenderPosterior` (same parameters, bounds
+and priors as ``abs fit``; crossed likelihood of two fixed-seed renders, see
+:mod:`abs.sampling.likelihood`); (4) walkers in a ball of ``ball`` Laplace standard errors around
+the fit; (5) emcee until the autocorrelation time is resolved or a budget is spent, the chain in
+an HDF5 file that a resumed run continues; (6) summaries and posterior predictive renderings.
+
+The chain file also holds (group ``abs``) what the chain belongs to and its noise model, so a
+resume uses the same likelihood and a resume of a different problem is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import emcee
+import h5py
+import numpy as np
+
+from abs.errors import InputError
+from abs.sampling.ensemble import EnsembleProgress, run_ensemble
+from abs.sampling.likelihood import NoiseModel, render_variance
+from abs.sampling.posterior import LogPrior, RenderPosterior
+from abs.sampling.predictive import PredictiveView, posterior_predictive
+from abs.sampling.summary import burn_in, parameter_summary
+
+__all__ = ["SampleSettings", "SampleResult", "sample", "read_start"]
+
+_GROUP = "abs"
+
+
+@dataclass(frozen=True)
+class SampleSettings:
+    """How ``abs.sample`` samples.
+
+    Attributes
+    ----------
+    spp : int
+        Samples per pixel of each of the two likelihood renders per view.
+    downsample : int
+        Compare images box-averaged by this factor (fewer, less noisy pixels: faster, and the
+        likelihood's Gaussian approximation of the render noise holds better).
+    clamp : float or None
+        Clamp renderings at this value (photographs that saturate).
+    walkers : int
+        Ensemble size (0: ``max(8, 4 P)`` rounded up to even, P the number of scalars).
+    max_steps : int
+        Chain length cap (steps of the whole ensemble, resumed runs included).
+    max_renders : int or None
+        Render budget of the chain (likelihood renders; each evaluation renders every training
+        view twice).
+    ball : float
+        Walkers start at the fit plus ``ball`` Laplace standard errors times N(0, 1).
+    check_every : int
+        Steps between autocorrelation estimates.
+    predictive_draws : int
+        Posterior draws rendered for the posterior predictive images.
+    eval_spp : int or None
+        Samples per pixel of the posterior predictive renders (default: the scene's).
+    fit_iterations, fit_refinement_steps : int
+        Settings of the fit that gives the starting point (when no fit is given).
+    seed : int
+        Base of all seeds (renders and the sampler).
+    """
+
+    spp: int = 16
+    downsample: int = 2
+    clamp: float | None = None
+    walkers: int = 0
+    max_steps: int = 5000
+    max_renders: int | None = None
+    ball: float = 0.5
+    check_every: int = 20
+    predictive_draws: int = 8
+    eval_spp: int | None = None
+    fit_iterations: int = 10
+    fit_refinement_steps: int = 3
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.spp < 1 or self.downsample < 1 or self.max_steps < 1 or self.walkers < 0:
+            raise InputError(None, "settings", "spp, downsample and max_steps must be >= 1, "
+                                               "walkers >= 0")
+        if self.walkers and self.walkers % 2:
+            raise InputError(None, "walkers", f"must be even (emcee moves half the ensemble at a "
+                                              f"time), got {self.walkers}")
+
+    def n_walkers(self, n_scalars: int) -> int:
+        w = self.walkers or max(8, 4 * n_scalars)
+        if w < 2 * n_scalars:
+            raise InputError(None, "walkers", f"need at least {2 * n_scalars} walkers for "
+                                              f"{n_scalars} scalars, got {w}")
+        return w + w % 2
+
+
+@dataclass
+class SampleResult:
+    """What sampling found; :meth:`summary` is ``summary.json``."""
+
+    names: tuple[str, ...]
+    sizes: tuple[int, ...]
+    units: tuple[str, ...]
+    labels: list[str]
+    chain: np.ndarray            # (S, W, P) after burn-in, physical units
+    log_prob: np.ndarray         # (S, W)
+    progress: EnsembleProgress
+    burn_in: int
+    start: dict[str, dict]       # the fit: name -> {"value": [...], "stderr": [...]}
+    noise: NoiseModel
+    reduced_chi2: float
+    renders: int
+    wall_s: float
+    settings: SampleSettings
+    r_hat: np.ndarray | None = None
+    predictive: list[PredictiveView] = field(default_factory=list, repr=False)
+    truth: dict[str, list] | None = None
+
+    def summary(self) -> dict:
+        tau = self.progress.tau if self.progress.tau is not None else np.full(len(self.labels), np.nan)
+        parameters = parameter_summary(self.chain, self.names, self.sizes, self.units, tau)
+        offset = 0
+        for name, n in zip(self.names, self.sizes):
+            entry = parameters[name]
+            if self.r_hat is not None:
+                entry["r_hat"] = self.r_hat[offset:offset + n].tolist()
+            entry["fit"] = self.start[name]
+            if self.truth and name in self.truth:
+                entry["truth"] = list(self.truth[name])
+            offset += n
+        clean = json.loads(json.dumps(parameters, default=float).replace("NaN", "null"))
+        return {
+            "parameters": clean,
+            "labels": self.labels,
+            "tau": {k: _finite(v) for k, v in zip(self.labels, tau)},
+            "r_hat": (None if self.r_hat is None
+                      else {k: _finite(v) for k, v in zip(self.labels, self.r_hat)}),
+            "acceptance_fraction": self.progress.acceptance_fraction,
+            "walkers": int(self.chain.shape[1]),
+            "steps": self.progress.steps,
+            "burn_in": self.burn_in,
+            "samples": int(self.chain.shape[0] * self.chain.shape[1]),
+            "converged": self.progress.converged,
+            "stop_reason": self.progress.stop_reason,
+            "evaluations": self.progress.evaluations,
+            "renders": self.renders,
+            "wall_s": round(self.wall_s, 3),
+            "noise": {**self.noise.to_dict(), "reduced_chi2_at_fit": self.reduced_chi2},
+            "likelihood": "crossed Gaussian of two fixed-seed renders, variance = photograph + "
+                          "render/2 (docs/sampling.md)",
+            "spp": self.settings.spp,
+            "downsample": self.settings.downsample,
+        }
+
+
+def _finite(v) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def read_start(fit_json: str | Path, names) -> dict[str, dict]:
+    """Values and standard errors of ``names`` from a ``fit.json``.
+
+    Raises
+    ------
+    InputError
+        If the file is unreadable or lacks a parameter.
+    """
+    path = Path(fit_json)
+    if path.is_dir():
+        path = path / "fit.json"
+    try:
+        parameters = json.loads(path.read_text())["parameters"]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise InputError(path, "parameters", f"not a readable fit.json ({exc})") from None
+    out = {}
+    for name in names:
+        entry = parameters.get(name)
+        if not isinstance(entry, dict) or "value" not in entry:
+            raise InputError(path, f"parameters.{name}", "missing: fit this parameter first")
+        value = np.atleast_1d(np.asarray(entry["value"], np.float64))
+        stderr = entry.get("stderr") or [None] * value.size
+        out[name] = {"value": value.tolist(),
+                     "stderr": [None if s is None else float(s) for s in stderr]}
+    return out
+
+
+def _fit_start(scene, capture, names, settings: SampleSettings) -> dict[str, dict]:
+    from abs.fitting import FitSettings, fit
+
+    result = fit(scene, capture, names, FitSettings(
+        spp=settings.spp, downsample=settings.downsample, clamp=settings.clamp,
+        max_iterations=settings.fit_iterations, refinement_steps=settings.fit_refinement_steps,
+        seed=settings.seed))
+    parameters = result.summary()["parameters"]
+    return {n: {"value": parameters[n]["value"], "stderr": parameters[n]["stderr"]} for n in names}
+
+
+def _identity(scene, capture, names, settings: SampleSettings) -> dict:
+    keep = ("spp", "downsample", "clamp", "seed")
+    return {"scene": str(getattr(scene, "source", scene)), "capture": str(Path(capture).resolve()),
+            "parameters": list(names), "settings": {k: asdict(settings)[k] for k in keep}}
+
+
+def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict) -> None:
+    with h5py.File(path, "a") as f:
+        if _GROUP in f:
+            del f[_GROUP]
+        g = f.create_group(_GROUP)
+        g.attrs["identity"] = json.dumps(identity)
+        g.attrs["start"] = json.dumps(start)
+        g["photo_variance"] = noise.photo_variance
+        for k, v in enumerate(noise.render_variance):
+            g[f"render_variance_{k}"] = v
+
+
+def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict]:
+    try:
+        with h5py.File(path, "r") as f:
+            g = f[_GROUP]
+            saved = json.loads(g.attrs["identity"])
+            start = json.loads(g.attrs["start"])
+            n = len(g["photo_variance"])
+            noise = NoiseModel(np.asarray(g["photo_variance"]),
+                               [np.asarray(g[f"render_variance_{k}"]) for k in range(n)])
+    except (OSError, KeyError, json.JSONDecodeError) as exc:
+        raise InputError(path, _GROUP, f"not an abs chain file ({exc}); delete it to start over") from None
+    for key, value in identity.items():
+        if saved.get(key) != value:
+            raise InputError(path, f"{_GROUP}.{key}", f"chain was sampled with {saved.get(key)!r}, "
+                             f"this run has {value!r}; use another --out folder or drop --resume")
+    return noise, start
+
+
+def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int) -> NoiseModel:
+    """The noise model at the fit ``theta``.
+
+    Render variance per pixel: ``(a - b)^2 / 2`` of two independent renders (smoothed).
+    Photograph variance per view: from the residuals ``rbar`` of the average of two more
+    renders, each ``rbar^2 - var_render / 2`` is an unbiased estimate of it (sensor noise plus any
+    model error the fit cannot remove); their weighted mean, weights ``1 / (var_photo +
+    var_render / 2)^2`` (iterated from Immerkaer's estimate), so that the few pixels with heavy
+    Monte-Carlo noise (caustics, glass) do not swamp it; scaled by ``M / (M - P)`` for the fitted
+    scalars.
+    """
+    from abs.fitting.observations import estimate_image_noise
+
+    r_bar = 0.5 * (problem.residuals(theta, spp, seed)[0] + problem.residuals(theta, spp, seed + 1)[0])
+    dof = r_bar.size / max(r_bar.size - theta.size, 1)
+    photo, renders, immerkaer, offset = [], [], [], 0
+    for k, obs in enumerate(problem.observations):
+        a = problem.render(obs, theta, spp, seed + 2 + 2 * k)
+        renders.append(render_variance(a, problem.render(obs, theta, spp, seed + 3 + 2 * k)))
+        immerkaer.append(estimate_image_noise(obs.photograph))
+        n = 3 * obs.pixels
+        half_render = renders[-1][obs.mask].ravel() / 2
+        excess = np.square(r_bar[offset:offset + n]) - half_render
+        offset += n
+        variance = max(immerkaer[-1] ** 2, 1e-12)
+        for _ in range(4):
+            weight = 1.0 / np.square(variance + half_render)
+            variance = max(float(np.sum(weight * excess) / np.sum(weight)) * dof, 1e-12)
+        photo.append(variance)
+    return NoiseModel(np.array(photo), renders, np.array(immerkaer))
+
+
+def _initial_walkers(posterior, theta: np.ndarray, stderr: np.ndarray, walkers: int,
+                     ball: float, rng: np.random.Generator) -> np.ndarray:
+    """Walkers at ``theta + ball * stderr * N(0, 1)``, redrawn where the prior is zero."""
+    out = np.empty((walkers, theta.size))
+    for w in range(walkers):
+        for _ in range(100):
+            candidate = theta + ball * stderr * rng.normal(size=theta.size)
+            if np.isfinite(posterior.prior(candidate)):
+                break
+        else:
+            raise InputError(None, "start", f"no start inside the bounds near {theta.tolist()}")
+        out[w] = candidate
+    return out
+
+
+def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSettings(),
+           chain_path: str | Path = "chain.h5", start: dict[str, dict] | None = None,
+           resume: bool = False, pool=None,
+           on_step: Callable[[EnsembleProgress], None] | None = None,
+           truth: dict[str, list] | None = None, variant: str | None = None) -> SampleResult:
+    """Sample the posterior of scene parameters given a capture's training views.
+
+    Parameters
+    ----------
+    scene : Scene or path
+    capture : path
+        Capture folder.
+    parameters : sequence of str, optional
+        Names as in ``abs fit`` (default: the scene's ``[fit] parameters``).
+    settings : SampleSettings
+    chain_path : path
+        The HDF5 chain file (emcee's ``HDFBackend``); replaced unless ``resume``.
+    start : dict, optional
+        ``name -> {"value": [...], "stderr": [...]}`` (e.g. :func:`read_start` of a fit.json);
+        default: run ``abs.fit`` first.
+    resume : bool
+        Continue the chain in ``chain_path`` (refused if it belongs to another problem).
+    pool : object with ``map``, optional
+        From :func:`abs.sampling.pools.evaluation_pool`.
+    on_step : callable, optional
+        Called with an :class:`EnsembleProgress` after every step.
+    truth : dict, optional
+        Known true values, copied into the summary.
+    variant : str, optional
+        Mitsuba variant of worker processes (default: this process's).
+
+    Returns
+    -------
+    SampleResult
+    """
+    import mitsuba as mi
+
+    from abs.fitting.fit import prepare
+    from abs.fitting.observations import observe
+    from abs.fitting.parameters import ParameterVector
+    from abs.fitting.problem import FitProblem
+
+    t0 = time.perf_counter()
+    chain_path = Path(chain_path)
+    scene, compiled, capture_obj, names = prepare(scene, capture, parameters)
+    capture = capture_obj.folder
+    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    problem = FitProblem(compiled, vector, [observe(v, settings.downsample)
+                                            for v in capture_obj.train_views], settings.clamp)
+    identity = _identity(scene, capture, names, settings)
+    resuming = resume and chain_path.exists()
+    if resuming:
+        noise, start = _read_meta(chain_path, identity)
+    else:
+        chain_path.unlink(missing_ok=True)
+        start = start or _fit_start(scene, capture, names, settings)
+    theta_fit = np.concatenate([np.asarray(start[n]["value"], np.float64) for n in names])
+    if theta_fit.size != vector.size:
+        raise InputError(None, "start", f"{theta_fit.size} values for {vector.size} scalars of {names}")
+    if not resuming:
+        noise = _estimate_noise(problem, theta_fit, settings.spp, settings.seed + 500)
+
+    masks = [o.mask for o in problem.observations]
+    prior = LogPrior.from_vector(vector, {n: p for n, p in scene.fit_priors.items() if n in names})
+    seeds = (settings.seed + 1, settings.seed + 2)
+    posterior = RenderPosterior(scene, str(capture), tuple(names), settings.spp, settings.downsample,
+                                seeds, noise.residual_variance(masks), prior, settings.clamp,
+                                variant or mi.variant())
+    posterior.adopt(problem)
+    r_a, r_b = posterior.residuals(theta_fit)
+    reduced_chi2 = float(np.mean(np.square((r_a + r_b) / 2) / posterior.variance))
+
+    walkers = settings.n_walkers(vector.size)
+    per_eval = 2 * len(problem.observations)
+    max_evaluations = None if settings.max_renders is None else settings.max_renders // per_eval
+    stderr = np.concatenate([[np.nan if s is None else s for s in start[n]["stderr"]] for n in names])
+    stderr = np.where(np.isfinite(stderr) & (stderr > 0), stderr, 0.1 * vector.step)
+    initial = None
+    if not resuming:
+        _write_meta(chain_path, identity, noise, start)
+        initial = _initial_walkers(posterior, theta_fit, stderr, walkers, settings.ball,
+                                   np.random.default_rng(settings.seed))
+    backend = emcee.backends.HDFBackend(str(chain_path))
+    if resuming and backend.shape[1] != vector.size:
+        raise InputError(chain_path, "mcmc", f"chain has {backend.shape[1]} scalars, not {vector.size}")
+    renders_before = problem.counter.renders
+    progress = run_ensemble(posterior, backend, initial, settings.max_steps, max_evaluations,
+                            pool=pool, seed=settings.seed, check_every=settings.check_every,
+                            on_step=on_step)
+
+    renders_during = problem.counter.renders  # in-process chain renders, counted below instead
+    burn = burn_in(progress.tau, progress.steps)
+    chain = backend.get_chain(discard=burn)
+    log_prob = backend.get_log_prob(discard=burn)
+    from abs.sampling.inference_data import inference_data, r_hat
+
+    sizes = vector.sizes
+    rhat = r_hat(inference_data(chain, names, sizes), names) if chain.shape[0] >= 4 else None
+    predictive = posterior_predictive(compiled, capture_obj, vector, chain, settings.predictive_draws,
+                                      settings.eval_spp or scene.render.spp, settings.seed + 900,
+                                      settings.clamp, problem.counter)
+    renders = (renders_before + problem.counter.renders - renders_during
+               + progress.evaluations * per_eval)
+    return SampleResult(tuple(names), sizes, vector.units, vector.labels(), chain, log_prob, progress,
+                        burn, start, noise, reduced_chi2, renders, time.perf_counter() - t0,
+                        settings, rhat, predictive, truth)
