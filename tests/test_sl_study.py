@@ -155,3 +155,18 @@ def test_dask_gives_the_local_result(small_basis, tmp_path):
         [(_, remote)] = list(map_tasks(run_task, [task], scheduler=cluster.scheduler_address))
     assert remote["delta_e_mean"] == pytest.approx(local["delta_e_mean"], rel=1e-6)
     assert remote["samples"] == local["samples"]
+
+
+@needs_shared
+def test_cli_rejects_bad_input(tmp_path, capsys):
+    """Unknown materials and error types are InputErrors naming the option (exit status 2)."""
+    from abs.cli.main import main
+
+    base = ["study", "sl-scanner", "--out", str(tmp_path), "--basis", str(tmp_path / "none.npz")]
+    assert main(base + ["--materials", "no-such-material"]) == 2
+    assert "--materials" in capsys.readouterr().err
+    assert main(base + ["--noise", "earthquake"]) == 2
+    assert "--noise" in capsys.readouterr().err
+    assert main(base + ["--repetitions", "0"]) == 2
+    assert main(base) == 2  # the basis file does not exist
+    assert "basis file not found" in capsys.readouterr().err
