@@ -1,0 +1,240 @@
+"""The diagnosis: fit the scene as given, locate the misfit, name the missing physics, show the fit
+improve (``abs diagnose``).
+
+1. **Baseline**: fit the scene file's ``[fit] parameters`` (:func:`abs.fit`).
+2. **Locate** (:mod:`.localise`): residual maps, regions, and which objects and image positions
+   hold the misfit.
+3. **Rank** (:mod:`.score`): every registered effect that the scene leaves out, by a score test
+   at its null value (one Jacobian each), or a short fit where the derivative at null vanishes.
+4. **Select** (:mod:`.select`): fit the strongest candidates (predicted BIC gain > 0) fully,
+   with the current model refitted alongside as the control; accept the best one that improves
+   the holdout views beyond noise and that BIC prefers. Repeat for another effect on top.
+5. **Guard**: with two effects accepted, refit without the earlier one; if the later one now does
+   its work alone (the earlier one no longer improves holdout and BIC), the earlier one was
+   soaking up the later one's signature and is dropped.
+
+:class:`Diagnosis` holds everything; :meth:`Diagnosis.to_json` is ``diagnosis.json`` (a public
+contract, see ``docs/diagnosis.md``). Storage, progress and the report are the caller's.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from abs.diagnosis.effects import Candidate, effect, effects
+from abs.diagnosis.localise import Region, ResidualMap, breakdown, find_regions, residual_maps
+from abs.diagnosis.model import extend_scene
+from abs.diagnosis.score import CandidateScore, score_candidates
+from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model
+from abs.errors import InputError
+from abs.fitting import FitSettings
+
+__all__ = ["diagnose", "Diagnosis", "Finding", "Round", "DEFAULT_SETTINGS"]
+
+#: Small, quick fits: half resolution, 16 samples per pixel.
+DEFAULT_SETTINGS = FitSettings(spp=16, downsample=2, max_iterations=10, refinement_steps=3)
+
+
+@dataclass
+class Round:
+    """One search for a further effect: scores, the control refit and the full trial fits."""
+
+    scores: list[CandidateScore]
+    control: ModelFit | None = None
+    trials: list[tuple[CandidateScore, ModelFit, Comparison]] = field(default_factory=list)
+
+
+@dataclass
+class Finding:
+    """An accepted effect."""
+
+    candidate: Candidate
+    explanation: str
+    parameters: dict[str, list]
+    comparison: Comparison
+    evidence: dict
+
+    def to_json(self) -> dict:
+        return {"effect": self.candidate.effect, "explanation": self.explanation,
+                "parameters": self.parameters,
+                "holdout_rmse_before": self.comparison.holdout_rmse_before,
+                "holdout_rmse_after": self.comparison.holdout_rmse_after,
+                "evidence": self.evidence}
+
+
+@dataclass
+class Diagnosis:
+    """What a diagnosis found; :meth:`to_json` is ``diagnosis.json``."""
+
+    baseline: ModelFit
+    final: ModelFit
+    maps: list[ResidualMap]
+    regions: list[Region]
+    breakdown: dict
+    rounds: list[Round]
+    findings: list[Finding]
+    wall_s: float
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def verdict(self) -> list[str]:
+        return [f.candidate.effect for f in self.findings]
+
+    @property
+    def candidates(self) -> list[CandidateScore]:
+        return self.rounds[0].scores if self.rounds else []
+
+    def to_json(self) -> dict:
+        base = self.baseline
+        return {
+            "baseline": {"parameters": {n: v.tolist() for n, v in base.values.items()},
+                         "train_rmse": base.rmse("train"), "holdout_rmse": base.rmse("holdout")},
+            "regions": [r.to_json() for r in self.regions],
+            "candidates": [s.to_json() for s in self.candidates],
+            "findings": [f.to_json() for f in self.findings],
+            "verdict": self.verdict,
+        }
+
+
+def _truth(capture, names) -> dict | None:
+    from abs.simulate import read_truth
+
+    return read_truth(capture.folder, names)
+
+
+def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, capture,
+             round_index: int) -> Finding:
+    c = score.candidate
+    stderr = trial.result.vector.split(trial.result.uncertainty.stderr)
+    evidence = {"target": c.target, "round": round_index + 1, "score": round(score.statistic, 3),
+                "score_method": score.method, "dof": score.dof,
+                "predicted_bic_gain": round(score.predicted_bic_gain, 3),
+                **comparison.to_json(),
+                "train_rmse_after": trial.rmse("train"),
+                "stderr": {p: [None if not np.isfinite(s) else float(s) for s in stderr[p]]
+                           for p in c.parameters}}
+    truth = _truth(capture, c.parameters)
+    if truth:
+        evidence["truth"] = truth
+    values = {p: trial.values[p].tolist() for p in c.parameters}
+    return Finding(c, effect(c.effect).explain(c.target, trial.values), values, comparison, evidence)
+
+
+def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effects: int = 2,
+             top_k: int = 2, only: list[str] | None = None, work_dir: str | Path | None = None,
+             on_step: Callable[[str], None] | None = None) -> Diagnosis:
+    """Find what physics the scene file leaves out, from a capture.
+
+    Parameters
+    ----------
+    scene : Scene or path
+        The scene file; its ``[fit] parameters`` are the baseline fit.
+    capture : Capture or path
+        Needs at least one holdout view (acceptance is decided on them).
+    settings : FitSettings
+        Settings of every fit and score (resolution, samples, iterations).
+    max_effects : int
+        Stop after this many accepted effects.
+    top_k : int
+        Candidates fitted fully per round (those with a positive predicted BIC gain).
+    only : list of str, optional
+        Effect names to consider (default: every registered effect).
+    work_dir : path, optional
+        Where the extended scene files are written (default: a temporary folder).
+    on_step : callable, optional
+        Called with a short description before every expensive step (progress display).
+    """
+    from abs.fitting.fit import prepare
+    from abs.render import Camera, compile_scene
+
+    t0 = time.perf_counter()
+    step = on_step or (lambda message: None)
+    scene, compiled, capture, names = prepare(scene, capture)
+    if not capture.holdout_views:
+        raise InputError(capture.folder / "cameras.json", "views",
+                         "diagnose needs at least one holdout view: effects are accepted only if "
+                         "they improve views that were not fitted")
+    known = effects()
+    for name in only or []:
+        if name not in known:
+            raise InputError(None, "effects", f"unknown effect {name!r}; known: {', '.join(sorted(known))}")
+    tmp = None
+    if work_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="abs-diagnose-")
+        work_dir = tmp.name
+    work = Path(work_dir)
+
+    step("baseline fit")
+    baseline = fit_model(scene, capture, (), {}, settings, work / "baseline.toml")
+    step("locating the residual")
+    cameras = {v.name: Camera.from_view(v) for v in capture.views}
+    maps = residual_maps(compiled, baseline.result.views, cameras)
+    regions, summary = find_regions(maps), breakdown(maps)
+    pool = [c for name, e in known.items() if not only or name in only
+            for c in e.candidates(scene, compiled)]
+
+    current, rounds, findings, accepted = baseline, [], [], []
+    scatter = 0.0
+    for r in range(max_effects):
+        remaining = [c for c in pool if c.effect not in {a.effect for a in accepted}]
+        if not remaining:
+            break
+        step(f"round {r + 1}: scoring {len(remaining)} candidates")
+        extended = extend_scene(scene, current.candidates + tuple(remaining), current.values,
+                                work / f"round{r + 1}_scores.toml")
+        scores = score_candidates(extended, capture, current.result.vector.names, remaining,
+                                  settings)
+        scores.sort(key=lambda s: -s.predicted_bic_gain)
+        round_ = Round(scores)
+        rounds.append(round_)
+        eligible = [s for s in scores if s.predicted_bic_gain > 0][:top_k]
+        if not eligible:
+            break
+        step(f"round {r + 1}: control refit")
+        round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
+                                   work / f"round{r + 1}_control.toml")
+        scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
+        for s in eligible:
+            c = s.candidate
+            step(f"round {r + 1}: fitting {c.label}")
+            trial = fit_model(scene, capture, current.candidates + (c,),
+                              {**current.values, **s.start}, settings,
+                              work / f"round{r + 1}_{c.effect}_{c.target}.toml")
+            round_.trials.append((s, trial, compare(round_.control, trial, scatter)))
+        passed = [t for t in round_.trials if t[2].accepted]
+        if not passed:
+            break
+        s, trial, comparison = min(passed, key=lambda t: t[2].delta_bic)
+        findings.append(_finding(s, trial, comparison, capture, r))
+        accepted.append(s.candidate)
+        current = trial
+
+    notes = []
+    if len(findings) >= 2:
+        # Guard: does every earlier effect still earn its place next to the later ones?
+        for f in list(findings[:-1]):
+            step(f"refit without {f.candidate.label}")
+            others = tuple(c for c in current.candidates if c != f.candidate)
+            start = {n: v for n, v in current.values.items() if n not in f.candidate.parameters}
+            reduced = fit_model(scene, capture, others, start, settings,
+                                work / f"without_{f.candidate.effect}_{f.candidate.target}.toml")
+            check = compare(reduced, current, scatter)
+            f.evidence["still_needed"] = check.to_json()
+            if not check.accepted:
+                notes.append(f"{f.candidate.label} dropped: once the other effects are fitted it "
+                             f"no longer improves the fit ({check.reason})")
+                findings.remove(f)
+                current = reduced
+        for f in findings:
+            f.parameters = {p: current.values[p].tolist() for p in f.candidate.parameters}
+            f.explanation = effect(f.candidate.effect).explain(f.candidate.target, current.values)
+    if tmp is not None:
+        tmp.cleanup()
+    return Diagnosis(baseline, current, maps, regions, summary, rounds, findings,
+                     time.perf_counter() - t0, notes)

@@ -1,0 +1,102 @@
+"""The catalogue of model extensions that a diagnosis may find missing, and its registry.
+
+An effect is one file in this folder defining a subclass of :class:`Effect` decorated with
+:func:`register`. It knows where in a scene it can apply (:meth:`Effect.targets`: only where the
+scene file leaves it out, i.e. at its null value and not fitted), how to add itself to a scene's
+TOML data at its null value (:meth:`Effect.add`, so the extended scene renders exactly like the
+given one), which parameters it releases to :func:`abs.fit` (:meth:`Effect.parameters`), and how
+to say in physical terms what a fitted value means (:meth:`Effect.explain`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+__all__ = ["Effect", "Candidate", "register", "effect", "effects"]
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One effect applied to one part of a scene.
+
+    Attributes
+    ----------
+    effect : str
+        Registry name (``absorption``, ``pose``, ``vignetting``...).
+    target : str
+        The material, object or table it applies to (``glass``, ``sphere``, ``sensor``).
+    parameters : tuple of str
+        Parameter names it releases to the fit (``glass.absorption``).
+    """
+
+    effect: str
+    target: str
+    parameters: tuple[str, ...]
+
+    @property
+    def label(self) -> str:
+        return f"{self.effect}:{self.target}"
+
+
+class Effect(ABC):
+    """A physical effect that a scene file may leave out.
+
+    Attributes
+    ----------
+    name : str
+        Registry name, as it appears in ``diagnosis.json``.
+    zero_null_derivative : bool
+        The renderer's derivative at the null value vanishes (e.g. a roughness of 0), so a score
+        test cannot see the effect; it is scored by a short fit instead.
+    full_resolution : bool
+        Its derivatives need renders at full resolution (pose: silhouette edge sampling).
+    """
+
+    name: ClassVar[str]
+    zero_null_derivative: ClassVar[bool] = False
+    full_resolution: ClassVar[bool] = False
+
+    @abstractmethod
+    def targets(self, scene, compiled) -> list[str]:
+        """Where the effect is missing in ``scene`` (a :class:`~abs.scene.scene.Scene`, with its
+        :class:`~abs.render.CompiledScene`): names of materials, objects or tables at the null
+        value whose parameters are not fitted."""
+
+    @abstractmethod
+    def add(self, data: dict, target: str) -> None:
+        """Add the effect at its null value to a scene's TOML data (in place)."""
+
+    @abstractmethod
+    def parameters(self, target: str) -> tuple[str, ...]:
+        """Parameter names the effect releases to the fit."""
+
+    @abstractmethod
+    def explain(self, target: str, values: dict[str, np.ndarray]) -> str:
+        """One or two sentences, in physical terms, on what the fitted ``values`` mean."""
+
+    def candidates(self, scene, compiled) -> list[Candidate]:
+        return [Candidate(self.name, t, self.parameters(t)) for t in self.targets(scene, compiled)]
+
+
+_REGISTRY: dict[str, Effect] = {}
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Class decorator: make an effect available under ``cls.name``."""
+    if cls.name in _REGISTRY and type(_REGISTRY[cls.name]) is not cls:
+        raise ValueError(f"effect {cls.name!r} registered twice")
+    _REGISTRY[cls.name] = cls()
+    return cls
+
+
+def effect(name: str) -> Effect:
+    return _REGISTRY[name]
+
+
+def effects() -> dict[str, Effect]:
+    """Every registered effect, by name."""
+    return dict(_REGISTRY)

@@ -1,0 +1,31 @@
+"""``env_distance``: the environment is at a finite distance, so its light shows parallax."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from abs.diagnosis.effects.base import Effect, register
+
+_PARAMETER = "environment.inverse_distance"
+
+
+@register
+class EnvironmentDistance(Effect):
+    name = "env_distance"
+
+    def targets(self, scene, compiled) -> list[str]:
+        missing = (scene.environment.inverse_distance == 0.0 and _PARAMETER not in scene.fit_parameters)
+        return ["environment"] if missing else []
+
+    def add(self, data: dict, target: str) -> None:
+        data["environment"]["inverse_distance"] = 0.0
+
+    def parameters(self, target: str) -> tuple[str, ...]:
+        return (_PARAMETER,)
+
+    def explain(self, target: str, values: dict) -> str:
+        inv = float(np.asarray(values[_PARAMETER], float).ravel()[0])
+        distance = f"about {1.0 / inv:.3g} m" if inv > 0 else "very far"
+        return (f"The surroundings are not infinitely far away but {distance} from the scene "
+                f"(1/distance = {inv:.3g} per metre), so what the glass and the cameras see of "
+                f"them shifts with viewpoint (parallax); the scene file puts them at infinity.")

@@ -1,0 +1,43 @@
+"""``pose``: an object is displaced or rotated from where the scene file places it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from abs.diagnosis.effects.base import Effect, register
+
+# Flat objects (a floor, a backdrop) slide within their own plane invisibly: only solid ones.
+# Glass objects are left out: the renderer's pose gradients miss silhouettes seen through glass
+# (docs/renderer.md), so neither the score test nor the fit can be trusted for them.
+_MIN_EXTENT_M = 1e-3
+
+
+@register
+class Pose(Effect):
+    name = "pose"
+    full_resolution = True  # silhouette edge sampling needs undownsampled cameras
+
+    def targets(self, scene, compiled) -> list[str]:
+        extents = {s.id(): np.array(s.bbox().max, float).ravel() - np.array(s.bbox().min, float).ravel()
+                   for s in compiled.mitsuba_scene.shapes()}
+        return [o.name for o in scene.objects
+                if not np.any(o.pose) and f"{o.name}.pose" not in scene.fit_parameters
+                and scene.materials[o.material].type_name != "dielectric"
+                and np.min(extents.get(o.name, np.zeros(3))) > _MIN_EXTENT_M]
+
+    def add(self, data: dict, target: str) -> None:
+        for table in data["objects"]:
+            if table["name"] == target:
+                table["pose"] = [0.0] * 6
+
+    def parameters(self, target: str) -> tuple[str, ...]:
+        return (f"{target}.pose",)
+
+    def explain(self, target: str, values: dict) -> str:
+        pose = np.asarray(values[f"{target}.pose"], float)
+        shift_mm = 1000.0 * pose[:3]
+        angle_deg = float(np.degrees(np.linalg.norm(pose[3:])))
+        return (f"The object '{target}' is not where the scene file puts it: it is shifted by "
+                f"{shift_mm[0]:+.1f}/{shift_mm[1]:+.1f}/{shift_mm[2]:+.1f} mm in x/y/z and rotated "
+                f"by {angle_deg:.2f} degrees, so its outline and what it reflects or refracts "
+                f"move in the photographs.")
