@@ -8,7 +8,6 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest import SHARED
 
 needs_shared = pytest.mark.skipif(not (SHARED / "data" / "merl_nbrdf").is_dir(),

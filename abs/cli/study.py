@@ -63,7 +63,7 @@ def run(args) -> int:
     from abs.brdf.measured import STUDY_MATERIALS, measured_material_names
     from abs.errors import InputError
     from abs.studies.sl_noise import NOISE_TYPES
-    from abs.studies.sl_scanner import StudyConfig, study_tasks
+    from abs.studies.sl_scanner import StudyConfig
     from abs.studies.sl_scoring import DEFAULT_ENVIRONMENT
     from abs.studies.sl_study import run_study
 
@@ -101,9 +101,13 @@ def run(args) -> int:
         score_size=args.score_size, score_spp=args.score_spp,
         environment=args.environment or DEFAULT_ENVIRONMENT, seed=args.seed,
         merl_dir=str(args.merl_dir) if args.merl_dir else None)
-    bar = tqdm(total=len(study_tasks(config)), desc="study tasks", unit="task")
-    summary = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler,
-                        on_result=lambda _: bar.update(1))
+    bar = tqdm(desc="study tasks", unit="task")
+
+    def progress(_: str, finished: int, to_run: int) -> None:
+        bar.total = to_run
+        bar.update(finished - bar.n)
+
+    summary = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, on_result=progress)
     bar.close()
     print(f"wrote {args.out / 'study.json'}, table1.md, table2.md, report.html "
           f"({summary['runtime_s']:.0f} s, {summary['tasks_run']} tasks run)")

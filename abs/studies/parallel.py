@@ -48,7 +48,8 @@ def map_tasks(function: Callable[[Any], Any], tasks: Sequence[Any], workers: int
             yield task, function(task)
         return
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed as futures_completed
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures import as_completed as futures_completed
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
         futures = {pool.submit(function, task): task for task in tasks}

@@ -22,7 +22,7 @@ from abs.render.bsdfs import tabulated as _tabulated  # noqa: F401  (registers a
 from abs.render.camera import Camera
 from abs.studies.sl_rig import RigCamera, SampleMesh, ScannerRig
 
-__all__ = ["sample_scene", "set_table", "render_point_lit", "render_scan"]
+__all__ = ["render_point_lit", "render_scan", "sample_scene", "set_table"]
 
 # Shadow rays leave the surface this far (metres) along the normal, far below the 1 mm noise.
 SURFACE_OFFSET_M = 1e-5

@@ -16,7 +16,7 @@ import numpy as np
 
 from abs.studies.sl_rig import SampleMesh
 
-__all__ = ["ScanEstimate", "NoiseType", "NOISE_TYPES", "register_noise", "perturb"]
+__all__ = ["NOISE_TYPES", "NoiseType", "ScanEstimate", "perturb", "register_noise"]
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ import numpy as np
 
 from abs.camera.pinhole import intrinsics_from_fov, look_at
 
-__all__ = ["RigCamera", "ScannerRig", "SampleMesh", "default_rig", "icosphere", "rotation_y"]
+__all__ = ["RigCamera", "SampleMesh", "ScannerRig", "default_rig", "icosphere", "rotation_y"]
 
 SAMPLE_DIAMETER_M = 0.1
 """Diameter of the scanned icospheres, metres (100 mm as in the paper)."""
@@ -47,7 +47,7 @@ class RigCamera:
         """Camera centre in world coordinates, metres."""
         return -self.R.T @ self.t
 
-    def at_step(self, angle: float) -> "RigCamera":
+    def at_step(self, angle: float) -> RigCamera:
         """The camera in the frame of a sample turned by ``angle`` (rad) about +y."""
         return RigCamera(self.K, self.R @ rotation_y(angle), self.t, self.width, self.height)
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
 
@@ -27,7 +26,7 @@ from abs.studies.sl_capture import SURFACE_OFFSET_M, sample_scene
 from abs.studies.sl_noise import ScanEstimate, tangent_frame
 from abs.studies.sl_rig import ScannerRig
 
-__all__ = ["BRDFSamples", "brdf_samples", "bilinear", "valid_pixels"]
+__all__ = ["BRDFSamples", "bilinear", "brdf_samples", "valid_pixels"]
 
 
 @dataclass(frozen=True)

@@ -18,15 +18,22 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from abs.brdf.measured import STUDY_MATERIALS
 from abs.studies.sl_noise import NOISE_TYPES
 
-__all__ = ["StudyConfig", "study_tasks", "run_task", "task_id", "in_plane_profile",
-           "PROFILE_ANGLES_DEG", "PROFILE_INCIDENCE_DEG", "LUMINANCE"]
+__all__ = [
+    "LUMINANCE",
+    "PROFILE_ANGLES_DEG",
+    "PROFILE_INCIDENCE_DEG",
+    "StudyConfig",
+    "in_plane_profile",
+    "run_task",
+    "study_tasks",
+    "task_id",
+]
 
 PROFILE_INCIDENCE_DEG = 45.0
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])

@@ -24,7 +24,7 @@ from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 
-__all__ = ["ScoreSettings", "Scorer", "reinhard", "ciede2000_image", "DEFAULT_ENVIRONMENT"]
+__all__ = ["DEFAULT_ENVIRONMENT", "ScoreSettings", "Scorer", "ciede2000_image", "reinhard"]
 
 DEFAULT_ENVIRONMENT = "polyhaven_hdri_1k/royal_esplanade_1k.hdr"
 """Environment map of the score, relative to the shared data folder."""
@@ -96,7 +96,7 @@ class Scorer:
         self.scene = mi.load_dict({"type": "scene", "sphere": {
             "type": "sphere", "radius": 0.05, "bsdf": {"type": "abs_tabulated", "id": "brdf"}}})
         self.params = mi.traverse(self.scene)
-        self.key = next(k for k in self.params.keys() if k.endswith("table"))
+        self.key = next(k for k in self.params.keys() if k.endswith("table"))  # noqa: SIM118 (SceneParameters)
         self.environment = Environment(environment)
         size = settings.size
         R, t = look_at(np.array([0.0, 0.05, 0.35]), np.zeros(3))
@@ -107,7 +107,7 @@ class Scorer:
         self.truth_display = reinhard(self.truth_image, self.log_average)
 
     @classmethod
-    def from_shared(cls, truth: np.ndarray, settings: ScoreSettings) -> "Scorer":
+    def from_shared(cls, truth: np.ndarray, settings: ScoreSettings) -> Scorer:
         """With the environment map ``settings.environment`` from the shared data folder."""
         from abs.io.images import read_image
         from abs.io.shared_data import shared_data_dir

@@ -20,7 +20,13 @@ from pathlib import Path
 from abs.io.fit_files import write_json
 from abs.studies.parallel import map_tasks
 from abs.studies.sl_rig import default_rig
-from abs.studies.sl_scanner import StudyConfig, run_task, study_tasks, task_digest, task_id
+from abs.studies.sl_scanner import (
+    StudyConfig,
+    run_task,
+    study_tasks,
+    task_digest,
+    task_id,
+)
 from abs.studies.sl_tables import markdown_table1, markdown_table2, table1, table2
 
 __all__ = ["run_study"]
@@ -43,7 +49,7 @@ def _load_done(folder: Path, tasks: list[dict]) -> dict[str, dict]:
 
 
 def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler: str | None = None,
-              on_result: Callable[[str], None] | None = None) -> dict:
+              on_result: Callable[[str, int, int], None] | None = None) -> dict:
     """Run (or resume) the study and write its folder (see the module docstring).
 
     Parameters
@@ -57,7 +63,8 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
     scheduler : str, optional
         Dask scheduler address.
     on_result : callable, optional
-        Called with each finished task's id (progress reporting).
+        Called as ``on_result(task_id, finished, to_run)`` after each task this call runs
+        (progress reporting; tasks resumed from ``results/`` are not counted).
 
     Returns
     -------
@@ -71,11 +78,12 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
     start = time.perf_counter()
     results = _load_done(results_dir, tasks)
     todo = [t for t in tasks if task_id(t) not in results]
-    for task, result in map_tasks(run_task, todo, workers=workers, scheduler=scheduler):
+    for finished, (task, result) in enumerate(map_tasks(run_task, todo, workers=workers,
+                                                        scheduler=scheduler), start=1):
         write_json(results_dir / f"{task_id(task)}.json", result)
         results[result["id"]] = result
         if on_result is not None:
-            on_result(result["id"])
+            on_result(result["id"], finished, len(todo))
     keyed = [{**t, "id": task_id(t)} for t in tasks]
     summary = {
         "config": config.to_dict(),

@@ -13,7 +13,7 @@ import numpy as np
 
 from abs.studies.sl_noise import NOISE_TYPES
 
-__all__ = ["table1", "table2", "markdown_table1", "markdown_table2"]
+__all__ = ["markdown_table1", "markdown_table2", "table1", "table2"]
 
 
 def _finite(values) -> np.ndarray:
