@@ -106,9 +106,6 @@ def test_recovers_glass_absorption_per_channel_and_environment_scale(tmp_path):
     _check_holdout_improves(result)
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "IOR fits are biased by up to 0.01 (measured: 1.480, 1.499, 1.514 for a truth of 1.49, 1.50, "
-    "1.52, with standard errors of 0.0007), larger than the 0.005 target; see docs/renderer.md"))
 def test_recovers_per_channel_ior(tmp_path):
     from abs.io.images import write_exr
 
@@ -122,8 +119,14 @@ def test_recovers_per_channel_ior(tmp_path):
     checker = np.where(((u // 8) + (v // 8)) % 2 == 0, 1.5, 0.2).astype(np.float32)
     write_exr(tmp_path / "env.exr", checker[..., None] * np.float32([1.0, 0.9, 0.8]))
     scene, capture = _case(tmp_path, template, truth, start, spp=512, assets=False)
-    result = fit(scene, capture, settings=FitSettings(spp=16, max_iterations=12, refinement_steps=4))
-    assert np.all(np.abs(result.values["glass.ior"] - truth["ior"]) < 0.005), result.values["glass.ior"]
+    # Levenberg-Marquardt on one 16-spp render stops up to 0.016 off (Monte-Carlo bias); the
+    # refinement's full Newton steps on independent renders remove that, and their average
+    # beats down the per-step noise (~0.005 at 16 spp).
+    result = fit(scene, capture, settings=FitSettings(spp=16, max_iterations=8, refinement_steps=8))
+    ior = result.values["glass.ior"]
+    assert np.all(np.abs(ior - truth["ior"]) < 0.005), ior
+    stderr = result.vector.split(result.uncertainty.stderr)["glass.ior"]
+    assert np.all(np.abs(ior - truth["ior"]) < 4 * stderr), (ior, stderr)
 
 
 def test_recovers_a_pose_offset_of_millimetres(tmp_path):

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from abs.errors import InputError
-from abs.fitting.laplace import laplace
+from abs.fitting.laplace import laplace, with_monte_carlo_error
 from abs.fitting.observations import downsample, downsample_camera, estimate_image_noise
-from abs.fitting.optimizers import OptimizerState, adam, gauss_newton_refinement, levenberg_marquardt
+from abs.fitting.optimizers import (OptimizerState, adam, cross_curvature, gauss_newton_refinement,
+                                   levenberg_marquardt)
 from abs.fitting.parameters import ParameterVector
 from abs.fitting.settings import parse_schedule, schedule_value
 from abs.io.fit_files import load_checkpoint, save_checkpoint
@@ -68,16 +69,33 @@ def test_levenberg_marquardt_reports_errors_of_the_evaluation():
         levenberg_marquardt(failing, OptimizerState("lm", 0, np.zeros(2)), 5, 3)
 
 
-def test_refinement_averages_noisy_gauss_newton_steps_to_the_solution():
+def test_refinement_takes_full_steps_despite_very_noisy_jacobians():
     A, y, _ = _linear_problem()
     exact = np.linalg.lstsq(A, y, rcond=None)[0]
     rng = np.random.default_rng(1)
+    noise = np.abs(A).mean()  # Jacobian noise as large as its signal (glass at low spp)
 
-    def noisy(z, it):  # an unbiased but noisy Jacobian, as from an independent render
-        return A @ z - y, A * (1 + 0.05 * rng.normal(size=A.shape)), 0.0
+    def noisy(z, it):  # unbiased, independent Jacobians, as from independent renders
+        return A @ z - y, tuple(A + noise * rng.normal(size=A.shape) for _ in range(2)), 0.0
 
-    state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, exact + 0.3), steps=8)
+    start = exact + 0.3
+    state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, start), steps=8)
     assert np.allclose(state.z, exact, atol=0.03)
+    # One Gauss-Newton step from J1^T J1 would stop about halfway (curvature inflated by the
+    # noise): the cross curvature's first step removes most of the offset.
+    first = np.asarray(state.moments["refinement"][0])
+    assert np.all(np.abs(first - exact) < 0.1 * 0.3), first - exact
+
+
+def test_cross_curvature_is_unbiased_where_the_self_product_is_not():
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(200, 3))
+    draws = [J + rng.normal(size=J.shape) for _ in range(400)]
+    cross = np.mean([cross_curvature(draws[i], draws[i + 1]) for i in range(0, 400, 2)], axis=0)
+    self_product = np.mean([d.T @ d for d in draws], axis=0)
+    truth = J.T @ J
+    assert np.allclose(np.diag(cross), np.diag(truth), rtol=0.05)
+    assert np.all(np.diag(self_product) > 1.5 * np.diag(truth))
 
 
 def test_adam_converges_and_resumes_from_its_state():
@@ -199,3 +217,14 @@ def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_sc
     half, g = problem.gradient(theta, 4, seed=3, jacobian_seed=8)
     assert half == pytest.approx(0.5 * r @ r, rel=1e-6)
     assert np.allclose(g, J.T @ r, rtol=2e-3, atol=1e-4 * np.abs(J.T @ r).max())
+
+
+def test_monte_carlo_error_of_averaged_points_adds_to_the_laplace_covariance():
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    approx = laplace(A @ exact - y, A)
+    points = exact + np.random.default_rng(3).normal(scale=0.2, size=(400, 3))
+    combined = with_monte_carlo_error(approx, points)
+    expected = np.sqrt(approx.stderr ** 2 + 0.2 ** 2 / 400)
+    assert np.allclose(combined.stderr, expected, rtol=0.1)
+    assert with_monte_carlo_error(approx, points[:1]) is approx

@@ -17,10 +17,10 @@ from typing import Callable
 import numpy as np
 
 from abs.errors import InputError
-from abs.fitting.laplace import LaplaceApproximation, laplace
+from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
 from abs.fitting.observations import Observation, estimate_image_noise, observe
-from abs.fitting.optimizers import (OptimizerState, adam, gauss_newton_refinement,
-                                    levenberg_marquardt)
+from abs.fitting.optimizers import (OptimizerState, adam, averaged_refinement_points,
+                                    gauss_newton_refinement, levenberg_marquardt)
 from abs.fitting.parameters import ParameterVector
 from abs.fitting.problem import FitProblem, RenderCounter
 from abs.fitting.settings import LM_MAX_SCALARS, FitSettings, schedule_value
@@ -228,15 +228,21 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                 J = np.concatenate([J, (np.diag(dtheta / prior_sd))[has_prior]])
             return r, J, loss
 
+        def second_jacobian(z, seed):
+            theta, dtheta = vector.to_physical(z), vector.derivative(z)
+            J = problem.jacobian(theta, settings.spp, seed) * dtheta / sigma
+            return np.concatenate([J, np.diag(dtheta / prior_sd)[has_prior]]) if has_prior.any() else J
+
         n_res = problem.n_residuals + int(has_prior.sum())
         # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
         if not state.moments.get("lm_converged") and not state.moments.get("refinement"):
             state = levenberg_marquardt(evaluate, state, n_res, settings.max_iterations,
                                         settings.rtol, settings.atol, iteration_done)
 
-        def fresh(z, iteration):  # independent seeds for r and J at every refinement step
+        def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
             base = settings.seed + 10_000 * iteration
-            return evaluate(z, iteration, seeds=(base + 1, base + 2))
+            r, J1, loss = evaluate(z, iteration, seeds=(base + 1, base + 2))
+            return r, (J1, second_jacobian(z, base + 3)), loss
 
         state = gauss_newton_refinement(fresh, state, settings.refinement_steps,
                                         on_iteration=iteration_done)
@@ -264,8 +270,13 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     after = _evaluate(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
     problem = train_problem(settings.downsample)
-    r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True)
-    uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None)
+    r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True,
+                             jacobian_seed=settings.seed + 98)
+    uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None,
+                          jacobian2=problem.jacobian(theta, settings.spp, settings.seed + 97))
+    if state.moments.get("refinement"):
+        points = averaged_refinement_points(state.moments["refinement"])
+        uncertainty = with_monte_carlo_error(uncertainty, np.array([vector.to_physical(p) for p in points]))
 
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)
     metrics = {key: {"before": m_before[key], "after": m_after[key]} for key in m_before}

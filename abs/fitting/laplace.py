@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaplaceApproximation", "laplace"]
+__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error"]
 
 
 @dataclass(frozen=True)
@@ -41,18 +41,52 @@ class LaplaceApproximation:
     identifiable: np.ndarray
 
 
-def laplace(residuals: np.ndarray, jacobian: np.ndarray,
-            prior_sd: np.ndarray | None = None) -> LaplaceApproximation:
+def _from_covariance(cov: np.ndarray, pixel_sigma: float, identifiable: np.ndarray) -> LaplaceApproximation:
+    stderr = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    stderr[~identifiable] = np.nan
+    with np.errstate(invalid="ignore", divide="ignore"):
+        correlation = cov / np.outer(stderr, stderr)
+    np.fill_diagonal(correlation, 1.0)
+    return LaplaceApproximation(cov, stderr, correlation, pixel_sigma, identifiable)
+
+
+def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray) -> LaplaceApproximation:
+    """Add the Monte-Carlo error of an estimate that is the mean of ``points`` (n, P).
+
+    The refinement's estimate is the mean of iterates that scatter around the solution because
+    each step sees a different noisy render; the covariance of that mean,
+    ``cov(points) / n``, is added to the Laplace covariance (with fewer than three points only
+    its diagonal, a covariance from two points being rank one).
+    """
+    points = np.atleast_2d(np.asarray(points, np.float64))
+    n = points.shape[0]
+    if n < 2:
+        return approx
+    extra = np.atleast_2d(np.cov(points, rowvar=False)) / n
+    if n < 3:
+        extra = np.diag(np.diag(extra))
+    return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)
+
+
+def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | None = None,
+            jacobian2: np.ndarray | None = None) -> LaplaceApproximation:
     """Laplace approximation from residuals (M,) and their Jacobian (M, P) at the optimum.
 
     Parameters
     ----------
     prior_sd : ndarray, shape (P,), optional
         Gaussian prior standard deviations (``inf`` where a scalar has no prior).
+    jacobian2 : ndarray, shape (M, P), optional
+        A second Jacobian from an independent render: the curvature is then
+        ``(J1^T J2 + J2^T J1) / 2``, which is not inflated by the Jacobians' Monte-Carlo noise
+        (``J1^T J1`` is, and would understate the standard errors). Directions whose curvature
+        this estimate cannot resolve from zero come out unidentifiable.
     """
     m, p = jacobian.shape
     sigma2 = float(residuals @ residuals) / max(m - p, 1)
-    precision = jacobian.T @ jacobian / max(sigma2, 1e-300)
+    curvature = jacobian.T @ jacobian if jacobian2 is None else \
+        0.5 * (jacobian.T @ jacobian2 + jacobian2.T @ jacobian)
+    precision = curvature / max(sigma2, 1e-300)
     if prior_sd is not None:
         precision = precision + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))
     # Eigen-decomposition: directions with (numerically) zero curvature are not identifiable.
@@ -61,9 +95,4 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray,
     good = w > floor
     inv = (V[:, good] / w[good]) @ V[:, good].T
     weak = np.abs(V[:, ~good]).max(axis=1) > 1e-3 if (~good).any() else np.zeros(p, bool)
-    stderr = np.sqrt(np.maximum(np.diag(inv), 0.0))
-    stderr[weak] = np.nan
-    with np.errstate(invalid="ignore", divide="ignore"):
-        correlation = inv / np.outer(stderr, stderr)
-    np.fill_diagonal(correlation, 1.0)
-    return LaplaceApproximation(inv, stderr, correlation, float(np.sqrt(sigma2)), ~weak)
+    return _from_covariance(inv, float(np.sqrt(sigma2)), ~weak)

@@ -8,8 +8,10 @@
   minimises the squared residual of one fixed noisy render (common random numbers: a smooth,
   deterministic objective), whose expectation adds the render variance; that variance depends on
   the parameters (a brighter scene is noisier), which pulls the minimum towards darker
-  renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; the later
-  half of its iterates is averaged.
+  renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; its
+  curvature comes from two independent Jacobians (:func:`cross_curvature`) so the steps are not
+  shortened by the Jacobian noise; its iterates after the first quarter are averaged, and their
+  scatter is the Monte-Carlo part of the standard errors.
 - :func:`adam`: Adam on stochastic gradients (a new render seed per iteration), with spp and
   resolution schedules; the choice for many scalars. The result is the average of the last
   quarter of the iterates, which cancels most of the Monte-Carlo jitter of the final steps.
@@ -31,7 +33,8 @@ import optimistix as optx
 
 from abs.fitting.jax_bridge import residual_function
 
-__all__ = ["OptimizerState", "levenberg_marquardt", "gauss_newton_refinement", "adam"]
+__all__ = ["OptimizerState", "levenberg_marquardt", "gauss_newton_refinement", "cross_curvature",
+           "averaged_refinement_points", "adam"]
 
 
 @dataclass
@@ -177,17 +180,45 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, 
     return state
 
 
-def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
+def cross_curvature(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
+    """Unbiased estimate of ``J^T J`` from two independent noisy Jacobians, made positive definite.
+
+    ``E[J1^T J1] = Jbar^T Jbar + Cov`` overstates the curvature by the Jacobian's Monte-Carlo
+    covariance; ``(J1^T J2 + J2^T J1) / 2`` has expectation ``Jbar^T Jbar`` exactly. Its noise can
+    make small eigenvalues negative: they are raised to 1e-3 of the largest (such directions are
+    then limited by the step clip, not thrown far).
+    """
+    H = 0.5 * (J1.T @ J2 + J2.T @ J1)
+    w, V = np.linalg.eigh(H)
+    w = np.maximum(w, 1e-3 * max(float(w.max()), 1e-300))
+    return (V * w) @ V.T
+
+
+def averaged_refinement_points(points: list) -> np.ndarray:
+    """The refinement points that are averaged: all but the first quarter (at least the first
+    one), which may still be travelling from the biased start; full Newton steps arrive within
+    a step or two, after which the points scatter independently around the unbiased solution."""
+    points = np.asarray(points, np.float64)
+    return points[max(1, len(points) // 4):] if len(points) > 1 else points
+
+
+def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
                             state: OptimizerState, steps: int, max_step: float = 1.0,
                             on_iteration: Callback | None = None) -> OptimizerState:
-    """Gauss-Newton steps on decorrelated renders; returns the mean of the later half of the
-    stepped-to points.
+    """Gauss-Newton steps on decorrelated renders; returns the mean of the stepped-to points
+    after the first quarter (:func:`averaged_refinement_points`).
+
+    Each step solves ``H dz = -g`` with ``g = (J1 + J2)^T r / 2`` and ``H`` the cross curvature
+    of two independent Jacobians (:func:`cross_curvature`): with ``r``, ``J1`` and ``J2`` from
+    three independent renders both are unbiased, so the step is the full Newton step on the
+    expected objective rather than one shortened by the Jacobian noise (which, with ``J1^T J1``,
+    took a third of the way per step at 16 spp on an IOR).
 
     Parameters
     ----------
     evaluate : callable
-        ``evaluate(z, iteration) -> (r, J, loss)`` with independent fresh seeds for ``r`` and
-        ``J`` at every call.
+        ``evaluate(z, iteration) -> (r, (J1, J2), loss)`` with independent fresh seeds for ``r``,
+        ``J1`` and ``J2`` at every call.
     steps : int
         Number of steps (each costs one evaluation).
     max_step : float
@@ -198,15 +229,14 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple[np.ndarr
     z = points[-1] if points else np.array(state.z, np.float64)
     while len(points) < steps:
         state.iteration += 1
-        r, J, loss = evaluate(z, state.iteration)
+        r, (J1, J2), loss = evaluate(z, state.iteration)
         state.history.append({"iteration": state.iteration, "loss": float(loss),
                               "z": list(map(float, z)), "phase": "refinement"})
-        step = np.linalg.lstsq(J, -r, rcond=None)[0]
+        step = np.linalg.solve(cross_curvature(J1, J2), -0.5 * (J1 + J2).T @ r)
         z = z + step * min(1.0, max_step / max(float(np.abs(step).max()), 1e-300))
         points.append(z)
         state.moments["refinement"] = [p.tolist() for p in points]
-        # Average the later half: the first steps are still travelling from the biased start.
-        state.z = np.mean(points[len(points) // 2:], axis=0)
+        state.z = np.mean(averaged_refinement_points(points), axis=0)
         if on_iteration is not None:
             on_iteration(state)
     return state
