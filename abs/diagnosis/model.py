@@ -13,10 +13,9 @@ from pathlib import Path
 import tomli_w
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.params.names import parameter_specs
 from abs.scene.load import load_scene
 from abs.scene.scene import Scene
-from abs.scene.write import _checked_values, _scene_table, write_scene
+from abs.scene.write import _scene_table, write_scene
 
 __all__ = ["extend_scene"]
 
@@ -41,11 +40,9 @@ def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[
     Scene
     """
     path = Path(path).resolve()
-    known = parameter_specs(scene)
-    base = {k: v for k, v in values.items() if k in known}
-    data = _scene_table(scene, path.parent, _checked_values(scene, base))
+    data = _scene_table(scene, path.parent, {})
     names = list(scene.fit_parameters)
-    for c in candidates:
+    for c in candidates:  # at the null value first: ``values`` are written over it below
         effect(c.effect).add(data, c.target)
         names += [p for p in c.parameters if p not in names]
     if names:
@@ -55,7 +52,7 @@ def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[
                     f"{', '.join(c.label for c in candidates) or 'no effect added'}.\n\n"
                     + tomli_w.dumps(data), encoding="utf-8")
     extended = load_scene(path)
-    if len(base) < len(values):  # effect parameters exist only in the extended scene
+    if values:
         write_scene(extended, path, values)
         extended = load_scene(path)
     return extended

@@ -1,0 +1,151 @@
+"""Run the diagnosis proof suite: simulate each case's capture from its truth scene, run
+``abs.diagnosis.diagnose`` on the effect-free scene file, and report verdicts, holdout RMSE and
+recovered parameters against the truth.
+
+    python3 benchmarks/diagnosis/run.py                  # quick default (see cases.QUICK)
+    python3 benchmarks/diagnosis/run.py --cases all --width 64 --height 48
+
+Writes ``benchmarks/results/diagnosis.json`` (after every case: an interrupted run resumes, skipping
+finished cases) and ``benchmarks/results/diagnosis.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cases import CASES, QUICK, build_scene  # noqa: E402
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+def _truth_scene(scene_path: Path, case, out: Path) -> Path:
+    from abs.diagnosis.effects import effects
+    from abs.diagnosis.model import extend_scene
+    from abs.render import compile_scene
+    from abs.scene import load_scene
+
+    scene = load_scene(scene_path)
+    compiled = compile_scene(scene)
+    pool = [c for e in effects().values() for c in e.candidates(scene, compiled)]
+    needed = [c for c in pool if any(p in case.truth for p in c.parameters)]
+    return extend_scene(scene, needed, case.truth, out).source
+
+
+def run_case(case, root: Path, args) -> dict:
+    from abs.diagnosis import diagnose
+    from abs.fitting import FitSettings
+    from abs.scene import load_scene
+    from abs.simulate import simulate_capture
+
+    folder = root / case.name
+    scene_path = build_scene(root / case.scene, case.scene)
+    truth_path = _truth_scene(scene_path, case, folder / "truth.toml")
+    simulate_capture(load_scene(truth_path), folder / "capture", n_cameras=args.views,
+                     width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
+                     read_noise=0.003, seed=3)
+    settings = FitSettings(spp=args.spp, downsample=args.downsample, max_iterations=args.iterations,
+                           refinement_steps=args.refinement, eval_spp=args.eval_spp)
+    t0 = time.perf_counter()
+    result = diagnose(scene_path, folder / "capture", settings, work_dir=folder / "models",
+                      on_step=lambda m: print(f"  {case.name}: {m}", flush=True))
+    wall = time.perf_counter() - t0
+    out = result.to_json()
+    recovered = {p: v for f in out["findings"] for p, v in f["parameters"].items()}
+    base = out["baseline"]
+    final_holdout = result.final.rmse("holdout")
+    return {"case": case.name, "scene": case.scene, "hidden": list(case.hidden),
+            "verdict": out["verdict"], "first_correct": bool(case.hidden) and out["verdict"][:1] == [case.hidden[0]],
+            "all_found": set(case.hidden) <= set(out["verdict"]),
+            "exact": sorted(out["verdict"]) == sorted(case.hidden),
+            "holdout_rmse_before": base["holdout_rmse"], "holdout_rmse_after": final_holdout,
+            "truth": case.truth, "recovered": recovered,
+            "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{x:.3g}" for x in np.ravel(v)) + "]"
+
+
+def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
+    single = [r for r in rows if len(r["hidden"]) == 1]
+    double = [r for r in rows if len(r["hidden"]) >= 2]
+    null = [r for r in rows if not r["hidden"]]
+    accepted = [r for r in rows if r["verdict"]]
+    summary = {
+        "single_effect_first_verdict_accuracy": (sum(r["first_correct"] for r in single) / len(single)) if single else None,
+        "two_effect_both_found": (sum(r["all_found"] for r in double) / len(double)) if double else None,
+        "null_false_alarm_rate": (sum(bool(r["verdict"]) for r in null) / len(null)) if null else None,
+        "holdout_improves_when_accepting": all(r["holdout_rmse_after"] < r["holdout_rmse_before"] for r in accepted),
+        "wall_s_per_diagnosis_median": float(np.median([r["wall_s"] for r in rows])) if rows else None,
+        "cases": len(rows),
+    }
+    lines = ["# Diagnosis proof suite", "",
+             f"Settings: {json.dumps(config)}", "",
+             "| case | hidden | verdict | holdout RMSE before -> after | recovered vs truth | wall s |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        rec = "; ".join(f"{p}: {_fmt(r['recovered'][p])} vs {_fmt(t)}" if p in r["recovered"]
+                        else f"{p}: not found (truth {_fmt(t)})" for p, t in r["truth"].items())
+        lines.append(f"| {r['case']} | {', '.join(r['hidden']) or '(none)'} | "
+                     f"{', '.join(r['verdict']) or '(empty)'} | {r['holdout_rmse_before']:.4g} -> "
+                     f"{r['holdout_rmse_after']:.4g} | {rec or '-'} | {r['wall_s']:.0f} |")
+    lines += ["", f"- first-verdict accuracy on single-effect cases: {summary['single_effect_first_verdict_accuracy']}",
+              f"- two-effect cases with both effects found: {summary['two_effect_both_found']}",
+              f"- false-alarm rate on null cases: {summary['null_false_alarm_rate']}",
+              f"- holdout RMSE improves whenever an effect is accepted: {summary['holdout_improves_when_accepting']}",
+              f"- median wall time of one diagnosis: {summary['wall_s_per_diagnosis_median']} s (shared 2-core machine)", ""]
+    return summary, "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--cases", default="quick", help="quick, all, or comma-separated case names")
+    p.add_argument("--width", type=int, default=48)
+    p.add_argument("--height", type=int, default=36)
+    p.add_argument("--views", type=int, default=3, help="cameras (the last is the holdout view)")
+    p.add_argument("--photo-spp", type=int, default=256)
+    p.add_argument("--spp", type=int, default=8)
+    p.add_argument("--eval-spp", type=int, default=32)
+    p.add_argument("--downsample", type=int, default=2)
+    p.add_argument("--iterations", type=int, default=8)
+    p.add_argument("--refinement", type=int, default=2)
+    p.add_argument("--work", type=Path, default=Path("out/diagnosis-benchmark"))
+    p.add_argument("--results", type=Path, default=RESULTS / "diagnosis.json")
+    args = p.parse_args(argv)
+
+    from abs.io.fit_files import write_json
+    from abs.render.variant import set_variant
+
+    set_variant()
+    names = QUICK if args.cases == "quick" else ([c.name for c in CASES] if args.cases == "all"
+                                                 else args.cases.split(","))
+    by_name = {c.name: c for c in CASES}
+    config = {k: v for k, v in vars(args).items() if k not in ("work", "results")}
+    done = []
+    if args.results.exists():
+        saved = json.loads(args.results.read_text())
+        if saved.get("config") == config:
+            done = saved["rows"]
+    for name in names:
+        if any(r["case"] == name for r in done):
+            continue
+        print(f"case {name}", flush=True)
+        done.append(run_case(by_name[name], args.work, args))
+        summary, _ = summarise(done, config)
+        write_json(args.results, {"config": config, "summary": summary, "rows": done})
+    summary, markdown = summarise(done, config)
+    write_json(args.results, {"config": config, "summary": summary, "rows": done})
+    args.results.with_suffix(".md").write_text(markdown)
+    print(markdown)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
