@@ -6,9 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from abs.brdf.directions import merl_entries, rusinkiewicz_angles
+from abs.brdf.basis import BRDFBasis
+from abs.brdf.directions import merl_entries, merl_entry_measure, rusinkiewicz_angles
 from abs.brdf.pca import build_basis, gram_pca, loo_residuals, scaled_components
 from abs.brdf.reconstruct import default_eta, fit_coefficients, project_table, reconstruct
+from abs.errors import InputError
 from abs.io.merl import MERL_SHAPE, MERL_SIZE, merl_sample_angles
 
 
@@ -96,6 +98,22 @@ def test_basis_reproduces_training_tables(small_basis):
     assert default_eta(basis, noise=0.1) > default_eta(basis)
 
 
+def test_basis_file_keeps_training_set(small_basis, tmp_path):
+    basis, _ = small_basis
+    basis.save(tmp_path / "basis.npz")
+    loaded = BRDFBasis.load(tmp_path / "basis.npz")
+    assert loaded.materials.tolist() == basis.materials.tolist()
+    np.testing.assert_array_equal(loaded.training_coefficients, basis.training_coefficients)
+    np.testing.assert_array_equal(loaded.singular_values, basis.singular_values)
+    assert loaded.residual_variance == basis.residual_variance > 0
+    arrays = dict(np.load(tmp_path / "basis.npz", allow_pickle=False))
+    arrays["training_coefficients"] = arrays["training_coefficients"][:, :2]
+    with open(tmp_path / "bad.npz", "wb") as file:
+        np.savez(file, **arrays)
+    with pytest.raises(InputError, match=r"bad\.npz: training_coefficients: expected shape \(m, 4\)"):
+        BRDFBasis.load(tmp_path / "bad.npz")
+
+
 def test_reconstruct_recovers_table_in_span(small_basis):
     basis, _ = small_basis
     rng = np.random.default_rng(3)
@@ -161,3 +179,14 @@ def test_merl_entries_at_sample_positions():
     # θh = 0 (mirror configuration): φh undefined, the entry still follows from θd.
     wi0, wo0 = pairs_from_angles(np.zeros(1), np.full(1, 30 / 90 * np.pi / 2), np.full(1, 0.3), np.zeros(1))
     assert merl_entries(wi0, wo0)[0, 0] // 180 == 30
+
+
+def test_entry_measure_integrates_direction_pairs():
+    measure = merl_entry_measure()
+    third = MERL_SIZE // 3
+    # All pairs of upper-hemisphere directions: (2π)² sr², to the grid's discretisation error.
+    assert measure[:third].sum() == pytest.approx(4 * np.pi**2, rel=2e-3)
+    # ∫∫ cosθi cosθo dωi dωo = π²: the cosine weight integrates correctly too.
+    theta_h, theta_d, phi_d = (a.ravel() for a in merl_sample_angles())
+    along, across = np.cos(theta_d) * np.cos(theta_h), np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
+    assert (measure[:third] * (along + across) * (along - across)).sum() == pytest.approx(np.pi**2, rel=5e-3)

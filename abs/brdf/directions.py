@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.io.merl import MERL_SHAPE
+from abs.io.merl import MERL_SHAPE, merl_sample_angles
 
-__all__ = ["rusinkiewicz_angles", "merl_entries"]
+__all__ = ["rusinkiewicz_angles", "merl_entries", "merl_entry_measure"]
 
 _CHANNEL_SIZE = MERL_SHAPE[1] * MERL_SHAPE[2] * MERL_SHAPE[3]
 
@@ -76,3 +76,29 @@ def merl_entries(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     k = np.rint(np.mod(phi_d, np.pi) / np.pi * n_phi) % n_phi
     flat = ((i.astype(np.int64) * n_d + j.astype(np.int64)) * n_phi + k.astype(np.int64))
     return flat[..., None] + _CHANNEL_SIZE * np.arange(3, dtype=np.int64)
+
+
+def merl_entry_measure() -> np.ndarray:
+    """The measure of direction-pair space each table entry stands for, sr².
+
+    With dωi·dωo = 4 cosθd sinθd sinθh dθh dθd dφd dφh (the Jacobian of the half/difference
+    parametrisation), an entry's cell has measure 4 cosθd sinθd sinθh Δθh Δθd Δφd · 2π (φh, by
+    isotropy) · 2 (φd and φd + π share the entry); Δθh is the spacing of the non-uniform θh samples
+    around the entry. Entries with a direction below the horizon get 0. Summed over a channel this
+    is ≈ (2π)², the measure of all pairs of upper-hemisphere directions. Use it to average errors
+    over directions instead of over table entries (a third of the entries lie at θh < 10°).
+
+    Returns
+    -------
+    np.ndarray
+        float64 (3·90·90·180,) in MERL order, the same for R, G and B.
+    """
+    theta_h, theta_d, phi_d = merl_sample_angles()
+    n_h, n_d, n_phi = MERL_SHAPE[1:]
+    d_theta_h = np.gradient((np.arange(n_h) / n_h) ** 2 * (np.pi / 2))[:, None, None]
+    cell = 4 * np.cos(theta_d) * np.sin(theta_d) * np.sin(theta_h) * d_theta_h
+    cell = cell * (np.pi / 2 / n_d) * (np.pi / n_phi) * 2 * np.pi * 2
+    along = np.cos(theta_d) * np.cos(theta_h)
+    across = np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
+    cell[(along + across <= 0) | (along - across <= 0)] = 0.0
+    return np.tile(cell.ravel(), 3)
