@@ -14,7 +14,7 @@ def add_parser(sub) -> None:
     p.add_argument("--from-fit", type=Path, metavar="FITDIR",
                    help="start around this fit (FITDIR/fit.json) instead of fitting first")
     p.add_argument("--walkers", type=int, default=0, help="ensemble size (default: max(8, 4 P))")
-    p.add_argument("--spp", type=int, default=16,
+    p.add_argument("--spp", type=int, default=64,
                    help="samples per pixel of each of the two likelihood renders per view")
     p.add_argument("--downsample", type=int, default=2, help="compare images reduced by this factor")
     p.add_argument("--clamp", type=float, default=None, help="clamp renderings at this value")

@@ -62,10 +62,13 @@ def smooth_variance(variance: np.ndarray, radius: int = 1) -> np.ndarray:
     return out / (2 * radius + 1) ** 2
 
 
-def render_variance(render_a: np.ndarray, render_b: np.ndarray) -> np.ndarray:
-    """Per-pixel Monte-Carlo variance of one render from two independent ones (same spp):
-    ``(a - b)^2 / 2``, smoothed by :func:`smooth_variance`."""
-    return smooth_variance(0.5 * np.square(np.asarray(render_a, np.float64) - render_b))
+def render_variance(renders: np.ndarray) -> np.ndarray:
+    """Per-pixel Monte-Carlo variance of one render from ``n >= 2`` independent renders at the
+    same spp, shape (n, H, W, 3): their sample variance, smoothed by :func:`smooth_variance`.
+
+    Monte-Carlo noise through glass is heavy-tailed (rare bright paths); more renders catch
+    more of its variance, two renders alone tend to miss it."""
+    return smooth_variance(np.var(np.asarray(renders, np.float64), axis=0, ddof=1))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,98 @@
+"""Effective samples per second and per render: emcee against the Laplace-proposal independence
+sampler, on the same posterior, from one run.
+
+One synthetic glass capture (default scene, absorption per RGB channel), one ``abs.fit``; then
+emcee (``abs.sample``'s ensemble, walkers started around the fit) and the independence
+Metropolis-Hastings sampler of ``abs.sampling.independence`` (proposal: the fit's Laplace
+covariance, scaled by 1.3) each evaluate the same :class:`RenderPosterior` a given number of
+times. Effective sample size per scalar: samples / integrated autocorrelation time (emcee's
+estimator, burn-in removed); the worst scalar counts. Writes
+``benchmarks/results/sampling_efficiency.json``.
+
+    python benchmarks/sampling_efficiency.py [--evaluations 240 --width 32 --height 24 --spp 64]
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from emcee.autocorr import integrated_time
+
+from abs.fitting import FitSettings, fit
+from abs.io.fit_files import write_json
+from abs.sampling import SampleSettings, sample
+from abs.sampling.independence import independence_sampler
+from sampling_data import PARAMETER, make_dataset
+
+RESULTS = Path(__file__).resolve().parent / "results" / "sampling_efficiency.json"
+TRUTH = np.array([4.0, 6.0, 8.0])
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--evaluations", type=int, default=240, help="log-posterior evaluations per sampler")
+    p.add_argument("--width", type=int, default=32)
+    p.add_argument("--height", type=int, default=24)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--walkers", type=int, default=8)
+    args = p.parse_args()
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        capture = make_dataset(tmp, TRUTH, args.width, args.height, seed=11)
+        fitted = fit(tmp / "scene.toml", capture, [PARAMETER],
+                     FitSettings(spp=args.spp, downsample=2, max_iterations=8, refinement_steps=2),
+                     initial={PARAMETER: [6.0, 6.0, 6.0]})
+        entry = fitted.summary()["parameters"][PARAMETER]
+        steps = args.evaluations // args.walkers - 1
+        t0 = time.perf_counter()
+        result = sample(tmp / "scene.toml", capture, [PARAMETER],
+                        SampleSettings(spp=args.spp, downsample=2, walkers=args.walkers, max_steps=steps,
+                                       predictive_draws=0),
+                        chain_path=tmp / "chain.h5",
+                        start={PARAMETER: {"value": entry["value"], "stderr": entry["stderr"]}})
+        wall_emcee = time.perf_counter() - t0
+        s = result.summary()
+        per_eval = 2 * 1  # two fixed-seed renders of the one training view
+        ess_emcee = min(s["parameters"][PARAMETER]["ess"])
+
+        # The same posterior (noise model, seeds, compiled scene) for the independence sampler.
+        t0 = time.perf_counter()
+        run = independence_sampler(result.posterior, np.array(entry["value"]),
+                                   fitted.uncertainty.covariance, args.evaluations - 1, seed=3)
+        wall_ind = time.perf_counter() - t0
+        chain = run.chain[10:]
+        ess_ind = float(np.min(chain.shape[0] / integrated_time(chain[:, None, :], quiet=True)))
+
+    rows = {
+        "emcee": {"evaluations": s["evaluations"], "renders": s["evaluations"] * per_eval,
+                  "wall_s": wall_emcee, "ess_min": ess_emcee, "acceptance": s["acceptance_fraction"],
+                  "mean": s["parameters"][PARAMETER]["mean"], "sd": s["parameters"][PARAMETER]["sd"]},
+        "independence_laplace": {"evaluations": args.evaluations, "renders": args.evaluations * per_eval,
+                                 "wall_s": wall_ind, "ess_min": ess_ind,
+                                 "acceptance": run.acceptance_fraction,
+                                 "mean": chain.mean(axis=0).tolist(), "sd": chain.std(axis=0).tolist()},
+    }
+    for row in rows.values():
+        row["ess_per_s"] = row["ess_min"] / row["wall_s"]
+        row["ess_per_render"] = row["ess_min"] / row["renders"]
+    ratios = {k: rows["independence_laplace"][k] / rows["emcee"][k] for k in ("ess_per_s", "ess_per_render")}
+    write_json(RESULTS, {"truth": TRUTH.tolist(), "fit": entry, "samplers": rows,
+                         "ratio_independence_over_emcee": ratios, "config": vars(args),
+                         "machine": platform.platform()})
+    print(f"{'sampler':<22} {'evals':>6} {'wall s':>7} {'min ESS':>8} {'ESS/s':>7} {'ESS/render':>11} {'accept':>7}")
+    for name, r in rows.items():
+        print(f"{name:<22} {r['evaluations']:>6} {r['wall_s']:>7.1f} {r['ess_min']:>8.1f} "
+              f"{r['ess_per_s']:>7.3f} {r['ess_per_render']:>11.4f} {r['acceptance']:>7.2f}")
+    print(f"ratio independence / emcee: ESS/s {ratios['ess_per_s']:.2f}, ESS/render "
+          f"{ratios['ess_per_render']:.2f}")
+    print(f"wrote {RESULTS}")
+
+
+if __name__ == "__main__":
+    main()

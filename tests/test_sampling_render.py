@@ -1,0 +1,134 @@
+"""Posterior sampling on rendered scenes: true values inside the 90 % intervals, the CLI's
+output contract, resume, bad input, and the Dask evaluation path."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from abs import load_scene
+from abs.cli.main import main
+from abs.simulate import simulate_capture
+
+TRUE_ABSORPTION = [2.0, 4.0, 8.0]  # glass_scene_dir's
+
+
+@pytest.fixture(scope="module")
+def capture(glass_scene_dir, tmp_path_factory):
+    """One training view and one holdout view of the glass sphere, 32x24, with sensor noise."""
+    folder = tmp_path_factory.mktemp("sample") / "capture"
+    simulate_capture(load_scene(glass_scene_dir / "scene.toml"), folder, n_cameras=2, n_holdout=1,
+                     width=32, height=24, spp=256, read_noise=0.003, seed=7)
+    return folder
+
+
+@pytest.mark.slow
+def test_true_absorption_lies_inside_the_90_percent_intervals(glass_scene_dir, capture, tmp_path):
+    from abs.fitting import FitSettings, fit
+    from abs.sampling import SampleSettings, sample
+
+    scene = glass_scene_dir / "scene.toml"
+    fitted = fit(scene, capture, ["glass.absorption"], FitSettings(spp=64, downsample=2, max_iterations=6,
+                                                                   refinement_steps=2),
+                 initial={"glass.absorption": [3.0, 3.0, 6.0]})
+    entry = fitted.summary()["parameters"]["glass.absorption"]
+    result = sample(scene, capture, ["glass.absorption"],
+                    SampleSettings(spp=64, downsample=2, walkers=8, max_steps=30, predictive_draws=2,
+                                   eval_spp=4),
+                    chain_path=tmp_path / "chain.h5",
+                    start={"glass.absorption": {"value": entry["value"], "stderr": entry["stderr"]}})
+    s = result.summary()["parameters"]["glass.absorption"]
+    truth = np.array(TRUE_ABSORPTION)
+    assert np.all(np.array(s["q05"]) < truth) and np.all(truth < np.array(s["q95"])), s
+    # Not vacuous (the prior is flat on [0, inf)): each interval is narrower than the value...
+    assert np.all(np.array(s["q95"]) - np.array(s["q05"]) < truth), s
+    # ... and the noise model explains the residuals at the fit (chi^2 per residual near 1).
+    assert 0.5 < result.reduced_chi2 < 2.0
+    assert result.renders > 30 * 8 * 2 and len(result.predictive) == 2
+
+
+def _sample(scene, capture, out, fit_dir, *extra):
+    return main(["sample", str(scene), str(capture), "--out", str(out), "--params", "environment.scale",
+                 "--from-fit", str(fit_dir), "--walkers", "8", "--spp", "8", "--downsample", "4",
+                 "--draws", "2", "--eval-spp", "4", *extra])
+
+
+@pytest.fixture()
+def fit_dir(tmp_path):
+    (tmp_path / "fit").mkdir()
+    (tmp_path / "fit" / "fit.json").write_text(json.dumps(
+        {"parameters": {"environment.scale": {"value": [1.0], "stderr": [0.01], "unit": "1"}}}))
+    return tmp_path / "fit"
+
+
+def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit_dir, tmp_path):
+    import arviz
+    import emcee
+
+    scene, out = glass_scene_dir / "scene.toml", tmp_path / "out"
+    assert _sample(scene, capture, out, fit_dir, "--max-steps", "2") == 0
+    first = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
+    assert first.shape == (2, 8, 1)
+    assert _sample(scene, capture, out, fit_dir, "--max-steps", "4", "--resume") == 0
+    chain = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
+    assert chain.shape == (4, 8, 1)
+    np.testing.assert_array_equal(chain[:2], first)  # continued, not restarted
+
+    summary = json.loads((out / "summary.json").read_text())
+    entry = summary["parameters"]["environment.scale"]
+    assert set(entry) >= {"mean", "sd", "q05", "q95", "ess", "tau", "unit", "fit", "truth"}
+    assert all(len(entry[k]) == 1 for k in ("mean", "sd", "q05", "q95", "ess"))
+    assert entry["q05"][0] < entry["mean"][0] < entry["q95"][0] and entry["sd"][0] > 0
+    assert summary["steps"] == 4 and summary["walkers"] == 8 and summary["stop_reason"] == "max_steps"
+    assert 0 < summary["acceptance_fraction"] <= 1 and summary["renders"] >= 5 * 8 * 2
+    assert {"tau", "r_hat", "wall_s", "noise", "burn_in"} <= set(summary)
+    idata = arviz.from_netcdf(out / "posterior.nc")
+    assert idata.posterior["environment.scale"].shape[:1] == (8,)
+    html = (out / "report" / "report.html").read_text()
+    for name in ("corner.png", "traces.png", "predictive_00_v0.png", "predictive_01_v1.png"):
+        assert (out / "report" / name).exists() and name in html
+
+    # A chain of another problem is refused, naming the field.
+    assert main(["sample", str(scene), str(capture), "--out", str(out), "--params", "glass.absorption",
+                 "--from-fit", str(fit_dir), "--resume"]) == 2
+
+
+def test_cli_bad_input_names_the_problem(glass_scene_dir, capture, fit_dir, tmp_path, capsys):
+    scene = glass_scene_dir / "scene.toml"
+    assert _sample(scene, capture, tmp_path / "a", fit_dir, "--walkers", "7") == 2
+    assert "walkers" in capsys.readouterr().err
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "fit.json").write_text("{not json")
+    assert _sample(scene, capture, tmp_path / "b", tmp_path / "bad") == 2
+    assert "fit.json" in capsys.readouterr().err
+    assert main(["sample", str(scene), str(capture), "--out", str(tmp_path / "c"), "--params",
+                 "glass.colour", "--from-fit", str(fit_dir)]) == 2
+    assert "glass.colour" in capsys.readouterr().err
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "chain.h5").write_bytes(b"not hdf5")
+    assert _sample(scene, capture, tmp_path / "d", fit_dir, "--resume") == 2
+    assert "chain.h5" in capsys.readouterr().err
+
+
+def test_dask_workers_evaluate_the_same_posterior(glass_scene_dir, capture):
+    """The posterior is a picklable description: a Dask worker compiles its own scene and, with
+    the same fixed seeds, returns the same log-posterior as this process."""
+    from dask.distributed import Client, LocalCluster
+
+    from abs.sampling.pools import evaluation_pool
+    from abs.sampling.posterior import LogPrior, RenderPosterior
+
+    posterior = RenderPosterior(glass_scene_dir / "scene.toml", str(capture), ("environment.scale",),
+                                spp=4, downsample=4, seeds=(1, 2), variance=np.float64(1e-4),
+                                prior=LogPrior(np.array([0.0]), np.array([np.inf])))
+    positions = [np.array([0.9]), np.array([1.0]), np.array([-1.0])]
+    local = [posterior(p) for p in positions]
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        with evaluation_pool(scheduler=client) as pool:
+            remote = pool.map(posterior, positions)
+    assert remote[2] == -np.inf and local[2] == -np.inf
+    np.testing.assert_allclose(remote[:2], local[:2], rtol=1e-9)
+    assert local[1] > local[0]  # the truth (scale 1) is more probable than 0.9
