@@ -126,6 +126,13 @@ def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, cap
     return Finding(c, effect(c.effect).explain(c.target, trial.values), values, comparison, evidence)
 
 
+def _clear_winner(first: tuple, runner_up: CandidateScore) -> bool:
+    """The first trial passed with a BIC gain more than twice the runner-up's predicted one: the
+    runner-up cannot win, so it is not fitted (the score test predicts the gain well)."""
+    _, _, comparison = first
+    return comparison.accepted and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain
+
+
 def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effects: int = 2,
              top_k: int = 2, only: list[str] | None = None, work_dir: str | Path | None = None,
              on_step: Callable[[str], None] | None = None) -> Diagnosis:
@@ -142,7 +149,9 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
     max_effects : int
         Stop after this many accepted effects.
     top_k : int
-        Candidates fitted fully per round (those with a positive predicted BIC gain).
+        Candidates fitted fully per round (those with a positive predicted BIC gain); a
+        runner-up is skipped when the first fit is accepted with a BIC gain more than twice the
+        runner-up's predicted gain.
     only : list of str, optional
         Effect names to consider (default: every registered effect).
     work_dir : path, optional
@@ -200,7 +209,9 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
                                    work / f"round{r + 1}_control.toml")
         scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
-        for s in eligible:
+        for i, s in enumerate(eligible):
+            if i and _clear_winner(round_.trials[0], s):
+                break
             c = s.candidate
             step(f"round {r + 1}: fitting {c.label}")
             trial = fit_model(scene, capture, current.candidates + (c,),

@@ -118,7 +118,19 @@ def main(argv=None) -> int:
     p.add_argument("--refinement", type=int, default=2)
     p.add_argument("--work", type=Path, default=Path("out/diagnosis-benchmark"))
     p.add_argument("--results", type=Path, default=RESULTS / "diagnosis.json")
+    p.add_argument("--merge", type=Path, nargs="*", default=None,
+                   help="combine the rows of these result files (runs split over processes) into --results")
     args = p.parse_args(argv)
+    if args.merge:
+        parts = [json.loads(f.read_text()) for f in args.merge]
+        rows = [r for part in parts for r in part["rows"]]
+        summary, markdown = summarise(rows, parts[0]["config"])
+        from abs.io.fit_files import write_json
+
+        write_json(args.results, {"config": parts[0]["config"], "summary": summary, "rows": rows})
+        args.results.with_suffix(".md").write_text(markdown)
+        print(markdown)
+        return 0
 
     from abs.io.fit_files import write_json
     from abs.render.variant import set_variant
@@ -127,7 +139,7 @@ def main(argv=None) -> int:
     names = QUICK if args.cases == "quick" else ([c.name for c in CASES] if args.cases == "all"
                                                  else args.cases.split(","))
     by_name = {c.name: c for c in CASES}
-    config = {k: v for k, v in vars(args).items() if k not in ("work", "results")}
+    config = {k: v for k, v in vars(args).items() if k not in ("work", "results", "merge", "cases")}
     done = []
     if args.results.exists():
         saved = json.loads(args.results.read_text())
