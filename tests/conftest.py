@@ -33,6 +33,20 @@ def make_env(path: Path, width: int = 64, height: int = 32) -> None:
     write_exr(path, env)
 
 
+def make_soft_env(path: Path, width: int = 64, height: int = 32) -> None:
+    """A bright room rather than a dark enclosure with one hot band: a sky gradient, a soft window
+    band and a coloured patch. Peaky lighting makes the caustics under glass so noisy (RMSE 0.16
+    at 32 spp with :func:`make_env`) that weak effects drown in Monte-Carlo noise."""
+    from abs.io.images import write_exr
+
+    v, u = np.mgrid[0:height, 0:width]
+    elevation = 1.0 - (v + 0.5) / height  # 1 at the zenith, 0 at the nadir
+    env = (0.35 + 0.5 * elevation)[..., None] * np.float32([1.0, 1.0, 0.95])
+    env = env + (np.exp(-((v - height * 0.22) / (0.06 * height)) ** 2) * 1.2)[..., None]
+    env[(u > width * 0.6) & (u < width * 0.75) & (v < height * 0.6)] += np.float32([0.6, 0.15, 0.1])
+    write_exr(path, env.astype(np.float32))
+
+
 def make_checker(path: Path, n: int = 64) -> None:
     import cv2
 

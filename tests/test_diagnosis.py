@@ -84,10 +84,17 @@ _EFFECTS = "absorption,stray_light,vignetting"
 
 
 @pytest.fixture(scope="module")
-def diagnosis_scene(small_scene_dir):
-    path = small_scene_dir / "diagnosis_scene.toml"
-    path.write_text(_SCENE)
-    return path
+def diagnosis_scene(small_scene_dir, tmp_path_factory):
+    """The small scene's glass sphere, floor and board, in a bright room (little caustic noise),
+    with clear glass; fitted: the environment's scale."""
+    from conftest import make_soft_env
+
+    root = tmp_path_factory.mktemp("diagnosis_scene")
+    for name in ("sphere.ply", "floor.ply", "backdrop.obj", "checker.png"):
+        (root / name).write_bytes((small_scene_dir / name).read_bytes())
+    make_soft_env(root / "env.exr")
+    (root / "scene.toml").write_text(_SCENE)
+    return root / "scene.toml"
 
 
 def _capture(scene_path, tmp_path, truth: dict):
@@ -130,7 +137,8 @@ def test_cli_finds_concealed_stray_light_and_writes_the_contract(diagnosis_scene
             "evidence"} <= set(finding)
     assert finding["holdout_rmse_after"] < finding["holdout_rmse_before"]
     recovered = np.array(finding["parameters"]["sensor.stray_light"])
-    assert np.all(np.abs(recovered - truth) < 0.3 * np.array(truth)), recovered
+    # Roughly: the offset trades off with the fitted environment scale.
+    assert np.all(np.abs(recovered - truth) < 0.5 * np.array(truth)), recovered
     assert (out / "report" / "report.html").exists()
 
 

@@ -35,6 +35,9 @@ from abs.fitting.settings import FitSettings
 __all__ = ["CandidateScore", "score_candidates"]
 
 SHORT_FIT_ITERATIONS = 4
+#: The score test renders with this many times the fits' samples per pixel: its power grows with
+#: the samples (S scales as 1 / sigma^2) and it costs one Jacobian, so it can afford them.
+SCORE_SPP_FACTOR = 4
 
 
 @dataclass(frozen=True)
@@ -129,7 +132,8 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
         theta0 = np.concatenate([compiled.get(n) for n in names])  # exactly the null, not clipped
         problem = FitProblem(compiled, vector, [observe(v, factor) for v in capture.train_views],
                              settings.clamp)
-        r, J = problem.residuals(theta0, settings.spp, settings.seed + 501, jacobian=True,
+        r, J = problem.residuals(theta0, SCORE_SPP_FACTOR * settings.spp, settings.seed + 501,
+                                 jacobian=True,
                                  jacobian_seed=settings.seed + 502)
         slices = vector.slices()
         base = np.concatenate([np.arange(slices[n].start, slices[n].stop) for n in base_parameters]
