@@ -39,7 +39,6 @@ from abs.brdf.directions import merl_entries, merl_entry_measure
 from abs.brdf.measured import STUDY_MATERIALS, measured_material_names, measured_table
 from abs.brdf.pca import build_basis
 from abs.brdf.reconstruct import default_eta, fit_coefficients, project_table
-from abs.io.merl import MERL_SIZE
 from abs.io.shared_data import cache_dir
 
 ROOT = Path(__file__).resolve().parents[1]

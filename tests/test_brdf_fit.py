@@ -21,10 +21,10 @@ import pytest
 from abs import load_scene
 from abs.brdf.measured import measured_table
 from abs.brdf.nbrdf import nbrdf_archive_path
-from abs.io.shared_data import shared_data_dir
 from abs.brdf.pca import build_basis
 from abs.brdf.reconstruct import project_table
 from abs.fitting import FitSettings, fit
+from abs.io.shared_data import shared_data_dir
 from abs.simulate import simulate_capture
 
 ENVIRONMENT = shared_data_dir() / "polyhaven_hdri_1k" / "royal_esplanade_1k.hdr"

@@ -9,7 +9,12 @@ import pytest
 from abs.brdf.basis import BRDFBasis
 from abs.brdf.directions import merl_entries, merl_entry_measure, rusinkiewicz_angles
 from abs.brdf.pca import build_basis, gram_pca, loo_residuals, scaled_components
-from abs.brdf.reconstruct import default_eta, fit_coefficients, project_table, reconstruct
+from abs.brdf.reconstruct import (
+    default_eta,
+    fit_coefficients,
+    project_table,
+    reconstruct,
+)
 from abs.errors import InputError
 from abs.io.merl import MERL_SHAPE, MERL_SIZE, merl_sample_angles
 
@@ -27,7 +32,7 @@ def test_gram_pca_equals_direct_svd():
     centred = original - original.mean(axis=0)
     np.testing.assert_allclose(data, centred, atol=1e-5)
     np.testing.assert_allclose(pca.mean, original.mean(axis=0), atol=1e-6)
-    u, s, vt = np.linalg.svd(centred, full_matrices=False)
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
     np.testing.assert_allclose(pca.singular_values[:-1], s[:-1], rtol=1e-9)
     assert pca.singular_values[-1] < 1e-6 * s[0]  # centring removes one rank
     q = scaled_components(data, pca.left, 5, chunk=100)

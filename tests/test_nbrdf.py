@@ -11,7 +11,13 @@ import pytest
 
 from abs.brdf.directions import rusinkiewicz_angles
 from abs.brdf.measured import STUDY_MATERIALS, measured_material_names, measured_table
-from abs.brdf.nbrdf import evaluate_nbrdf, nbrdf_archive_path, nbrdf_material_names, nbrdf_table, nbrdf_weights
+from abs.brdf.nbrdf import (
+    evaluate_nbrdf,
+    nbrdf_archive_path,
+    nbrdf_material_names,
+    nbrdf_table,
+    nbrdf_weights,
+)
 from abs.errors import InputError
 from abs.io.merl import MERL_SHAPE, merl_sample_angles, write_merl
 

@@ -95,7 +95,7 @@ def scaled_components(centred: np.ndarray, left: np.ndarray, n_components: int,
     np.ndarray
         (K, n) float32.
     """
-    m, n = centred.shape
+    n = centred.shape[1]
     u = left[:, :n_components].T  # (K, m)
     components = np.empty((n_components, n), np.float32)
     for start in range(0, n, chunk):
