@@ -1,0 +1,1 @@
+"""OpenCV pinhole camera helpers in numpy (projection, look-at, intrinsics)."""

@@ -1,0 +1,1 @@
+"""File formats: images (EXR, HDR, PNG), capture folders, MERL tables, fit outputs."""
