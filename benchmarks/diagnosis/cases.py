@@ -37,6 +37,7 @@ CASES = [
     Case("sphere-absorption+vignetting", "sphere", ("absorption", "vignetting"),
          {"glass.absorption": [3.0, 6.0, 10.0], "sensor.vignetting": [-0.8, 0.0]}),
     Case("box-pose", "box", ("pose",), {"box.pose": [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]}),
+    Case("box-pose-1cm", "box", ("pose",), {"box.pose": [0.01, 0.0, -0.008, 0.0, 0.1, 0.0]}),
     Case("box-camera_response", "box", ("camera_response",), {"sensor.response": [0.9, 0.9, 0.9]}),
     Case("box-null", "box", ()),
     Case("box-absorption+stray_light", "box", ("absorption", "stray_light"),
