@@ -122,7 +122,7 @@ def test_recovers_per_channel_ior(tmp_path):
     # Levenberg-Marquardt on one 16-spp render stops up to 0.016 off (Monte-Carlo bias); the
     # refinement's full Newton steps on independent renders remove that, and their average
     # beats down the per-step noise (~0.005 at 16 spp).
-    result = fit(scene, capture, settings=FitSettings(spp=16, max_iterations=8, refinement_steps=8))
+    result = fit(scene, capture, settings=FitSettings(spp=32, max_iterations=6, refinement_steps=10))
     ior = result.values["glass.ior"]
     assert np.all(np.abs(ior - truth["ior"]) < 0.005), ior
     stderr = result.vector.split(result.uncertainty.stderr)["glass.ior"]
