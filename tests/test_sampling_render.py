@@ -52,7 +52,7 @@ def test_true_absorption_lies_inside_the_90_percent_intervals(glass_scene_dir, c
 def _sample(scene, capture, out, fit_dir, *extra):
     return main(["sample", str(scene), str(capture), "--out", str(out), "--params", "environment.scale",
                  "--from-fit", str(fit_dir), "--walkers", "8", "--spp", "8", "--downsample", "4",
-                 "--draws", "2", "--eval-spp", "4", *extra])
+                 "--draws", "2", "--eval-spp", "4", "--workers", "1", *extra])  # later options win
 
 
 @pytest.fixture()
@@ -68,10 +68,11 @@ def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit
     import emcee
 
     scene, out = glass_scene_dir / "scene.toml", tmp_path / "out"
-    assert _sample(scene, capture, out, fit_dir, "--max-steps", "2") == 0
+    # The first run evaluates in a local process pool (the default), the resumed one in-process.
+    assert _sample(scene, capture, out, fit_dir, "--max-steps", "2", "--workers", "2") == 0
     first = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
     assert first.shape == (2, 8, 1)
-    assert _sample(scene, capture, out, fit_dir, "--max-steps", "4", "--resume") == 0
+    assert _sample(scene, capture, out, fit_dir, "--max-steps", "4", "--resume", "--workers", "1") == 0
     chain = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
     assert chain.shape == (4, 8, 1)
     np.testing.assert_array_equal(chain[:2], first)  # continued, not restarted

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 
@@ -23,8 +24,9 @@ def add_parser(sub) -> None:
     p.add_argument("--draws", type=int, default=8, help="posterior draws rendered for the report")
     p.add_argument("--eval-spp", type=int, default=None,
                    help="samples per pixel of the posterior predictive renders (default: the scene's)")
-    p.add_argument("--workers", type=int, default=1,
-                   help="local worker processes for likelihood evaluations (1: this process)")
+    p.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1),
+                   help="local worker processes for likelihood evaluations (1: this process; "
+                        "default: 2, or 1 on a one-core machine)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): evaluate there")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resume", action="store_true", help="continue the chain in OUT/chain.h5")
