@@ -160,7 +160,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         Called with a short description before every expensive step (progress display).
     """
     from abs.fitting.fit import prepare
-    from abs.render import Camera, compile_scene
+    from abs.render import Camera
 
     t0 = time.perf_counter()
     step = on_step or (lambda message: None)
