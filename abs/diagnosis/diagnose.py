@@ -198,7 +198,8 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         extended = extend_scene(scene, current.candidates + tuple(remaining), current.values,
                                 work / f"round{r + 1}_scores.toml")
         scores = score_candidates(extended, capture, current.result.vector.names, remaining,
-                                  settings)
+                                  settings, any(effect(c.effect).full_resolution
+                                                for c in current.candidates))
         scores.sort(key=lambda s: -s.predicted_bic_gain)
         round_ = Round(scores)
         rounds.append(round_)

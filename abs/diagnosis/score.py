@@ -101,7 +101,7 @@ def _inside(vector: ParameterVector, theta: np.ndarray, candidate: slice) -> np.
 
 
 def score_candidates(scene, capture, base_parameters, candidates: list[Candidate],
-                     settings: FitSettings) -> list[CandidateScore]:
+                     settings: FitSettings, full_resolution: bool = False) -> list[CandidateScore]:
     """Score candidates against the current model, sharing one Jacobian among them.
 
     Parameters
@@ -116,6 +116,9 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
     candidates : list of Candidate
     settings : FitSettings
         ``spp``, ``downsample``, ``clamp`` and ``seed`` of the renders.
+    full_resolution : bool
+        The current model holds an effect that needs full resolution (an accepted pose): every
+        candidate is then scored without downsampling.
     """
     scores = {}
     groups: dict[int, list[Candidate]] = {}
@@ -124,7 +127,8 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
         if e.zero_null_derivative:
             scores[c] = _short_fit(scene, capture, c, settings)
         else:
-            groups.setdefault(1 if e.full_resolution else settings.downsample, []).append(c)
+            factor = 1 if e.full_resolution or full_resolution else settings.downsample
+            groups.setdefault(factor, []).append(c)
     for factor, group in groups.items():
         names = tuple(base_parameters) + tuple(p for c in group for p in c.parameters)
         _, compiled, capture, names = prepare(scene, capture, names)
