@@ -15,7 +15,7 @@ import tomli_w
 from abs.diagnosis.effects import Candidate, effect
 from abs.scene.load import load_scene
 from abs.scene.scene import Scene
-from abs.scene.write import _scene_table, write_scene
+from abs.scene.write import scene_table, write_scene
 
 __all__ = ["extend_scene"]
 
@@ -40,7 +40,7 @@ def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[
     Scene
     """
     path = Path(path).resolve()
-    data = _scene_table(scene, path.parent, {})
+    data = scene_table(scene, path.parent, {})
     names = list(scene.fit_parameters)
     for c in candidates:  # at the null value first: ``values`` are written over it below
         effect(c.effect).add(data, c.target)

@@ -17,7 +17,7 @@ from matplotlib.patches import Rectangle
 from abs.io.images import auto_exposure, tonemap
 from abs.metrics import log_error
 from abs.report import figures, html
-from abs.report.html import _number, _table
+from abs.report.html import format_number, html_table
 from abs.report.view import ReportView
 
 __all__ = ["write_diagnosis_report", "plot_residual_map", "plot_candidates"]
@@ -74,18 +74,18 @@ def _candidates_table(rounds) -> str:
     for i, r in enumerate(rounds):
         for s in r.scores:
             rows.append([str(i + 1), escape(s.candidate.label), escape(s.method), str(s.dof),
-                         _number(s.statistic, ".1f"), _number(s.predicted_bic_gain, ".1f")])
-    return _table(["round", "candidate", "method", "dof", "score S", "predicted BIC gain"], rows)
+                         format_number(s.statistic, ".1f"), format_number(s.predicted_bic_gain, ".1f")])
+    return html_table(["round", "candidate", "method", "dof", "score S", "predicted BIC gain"], rows)
 
 
 def _trials_table(rounds) -> str:
     rows = []
     for i, r in enumerate(rounds):
         for s, trial, c in r.trials:
-            rows.append([str(i + 1), escape(trial.label), _number(c.holdout_rmse_before),
-                         _number(c.holdout_rmse_after), _number(c.holdout_z, ".1f"),
-                         _number(c.delta_bic, ".1f"), "yes" if c.accepted else "no", escape(c.reason)])
-    return _table(["round", "model", "holdout RMSE, reference", "holdout RMSE, model", "holdout z",
+            rows.append([str(i + 1), escape(trial.label), format_number(c.holdout_rmse_before),
+                         format_number(c.holdout_rmse_after), format_number(c.holdout_z, ".1f"),
+                         format_number(c.delta_bic, ".1f"), "yes" if c.accepted else "no", escape(c.reason)])
+    return html_table(["round", "model", "holdout RMSE, reference", "holdout RMSE, model", "holdout z",
                    "delta BIC", "accepted", "why"], rows)
 
 
@@ -107,14 +107,14 @@ def write_diagnosis_report(folder: str | Path, diagnosis) -> Path:
     sections.append(html.section("Metrics (baseline fit, final model)", html.metrics_table(summary)))
 
     region_rows = [[str(i + 1), escape(r.view), escape(str(list(r.bbox))),
-                    _number(100 * r.share_of_residual, ".1f"), escape(r.where),
+                    format_number(100 * r.share_of_residual, ".1f"), escape(r.where),
                     escape(", ".join(f"{x:+.3g}" for x in r.mean_residual))]
                    for i, r in enumerate(diagnosis.regions)]
     b = diagnosis.breakdown
-    breakdown_rows = ([[escape(k), _number(100 * v, ".1f")] for k, v in b["objects"].items()]
-                      + [[f"ring {i + 1} of 4 (centre to corners)", _number(100 * v, ".1f")]
+    breakdown_rows = ([[escape(k), format_number(100 * v, ".1f")] for k, v in b["objects"].items()]
+                      + [[f"ring {i + 1} of 4 (centre to corners)", format_number(100 * v, ".1f")]
                          for i, v in enumerate(b["radius_rings"])]
-                      + [[f"channel {c}", _number(100 * v, ".1f")] for c, v in zip("RGB", b["channels"])])
+                      + [[f"channel {c}", format_number(100 * v, ".1f")] for c, v in zip("RGB", b["channels"])])
     figs = []
     photos = {v.name: v for v in base.result.views}
     for m in diagnosis.maps:
@@ -126,9 +126,9 @@ def write_diagnosis_report(folder: str | Path, diagnosis) -> Path:
                                       "regions of concentrated residual"))
     sections.append(html.section(
         "Where the mismatch is",
-        _table(["region", "view", "bbox [x0, y0, x1, y1]", "share of residual (%)", "where",
+        html_table(["region", "view", "bbox [x0, y0, x1, y1]", "share of residual (%)", "where",
                 "mean rendering - photograph (R, G, B)"], region_rows),
-        _table(["squared residual by", "share (%)"], breakdown_rows),
+        html_table(["squared residual by", "share (%)"], breakdown_rows),
         f"<p>Mean rendering - photograph per channel: "
         f"{escape(', '.join(f'{x:+.4g}' for x in b['mean_residual']))}.</p>", *figs))
 

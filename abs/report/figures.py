@@ -21,14 +21,14 @@ from abs.metrics import log_error
 from abs.report.data import as_vector
 from abs.report.view import ReportView
 
-__all__ = ["error_limits", "plot_view", "plot_loss", "plot_traces", "plot_correlation"]
+__all__ = ["save_figure", "error_limits", "plot_view", "plot_loss", "plot_traces", "plot_correlation"]
 
 _ERROR_COLORMAP = "magma"
 _DPI = 100
 _PANEL_INCHES = 3.2  # width of one image panel
 
 
-def _save(fig: Figure, path: Path) -> None:
+def save_figure(fig: Figure, path: Path) -> None:
     # "tight" keeps long rotated tick labels (correlation names) inside the image.
     fig.savefig(path, dpi=_DPI, bbox_inches="tight")
 
@@ -91,7 +91,7 @@ def plot_view(path: Path, view: ReportView, limits: tuple[float, float]) -> None
     for ax in axes.flat:
         ax.set_axis_off()
     fig.colorbar(errors, ax=axes[:, 2], label="log10 RGB error (radiance)", shrink=0.8)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_loss(path: Path, iterations: np.ndarray, loss: np.ndarray) -> None:
@@ -112,7 +112,7 @@ def plot_loss(path: Path, iterations: np.ndarray, loss: np.ndarray) -> None:
     _iteration_axis(ax)
     ax.set_ylabel("loss")
     ax.grid(True, which="both", alpha=0.3)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_traces(path: Path, traces: Mapping[str, tuple[np.ndarray, np.ndarray]],
@@ -153,7 +153,7 @@ def plot_traces(path: Path, traces: Mapping[str, tuple[np.ndarray, np.ndarray]],
             ax.legend(fontsize="small")
     for ax in axes[len(traces):]:
         ax.set_visible(False)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_correlation(path: Path, names: Sequence[str], matrix: Sequence[Sequence[float]]) -> None:
@@ -182,7 +182,7 @@ def plot_correlation(path: Path, names: Sequence[str], matrix: Sequence[Sequence
                 ax.text(j, i, f"{c:.2f}", ha="center", va="center", fontsize="x-small",
                         color="white" if abs(c) > 0.6 else "black")
     fig.colorbar(image, ax=ax, label="correlation", shrink=0.8)
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_scan(path: Path, summary: Mapping, truth: Sequence[float] | None = None) -> None:
@@ -202,4 +202,4 @@ def plot_scan(path: Path, summary: Mapping, truth: Sequence[float] | None = None
     ax.set_ylabel("RMSE of the channel (linear RGB)")
     ax.set_title("one-parameter scans (solid: minimum" + (", dashed: truth)" if truth else ")"))
     ax.legend()
-    _save(fig, path)
+    save_figure(fig, path)

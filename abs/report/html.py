@@ -14,7 +14,7 @@ import numpy as np
 
 from abs.report.data import as_vector
 
-__all__ = ["metrics_table", "parameter_table", "figure", "view_section", "section", "page"]
+__all__ = ["format_number", "html_table", "metrics_table", "parameter_table", "figure", "view_section", "section", "page"]
 
 _MISSING = "—"
 
@@ -33,7 +33,7 @@ img { max-width: 100%; height: auto; }
 """
 
 
-def _number(value: object, spec: str = ".4g") -> str:
+def format_number(value: object, spec: str = ".4g") -> str:
     """``value`` formatted with ``spec``, or a dash when it is missing or NaN."""
     if value is None or not np.isfinite(float(value)):
         return _MISSING
@@ -50,7 +50,7 @@ def _row(cells: Iterable[str], header: bool = False) -> str:
     return "<tr>" + "".join(f"<{tag}>{c}</{tag}>" for c in cells) + "</tr>"
 
 
-def _table(header: list[str], rows: Iterable[Iterable[str]]) -> str:
+def html_table(header: list[str], rows: Iterable[Iterable[str]]) -> str:
     head = _row((escape(h) for h in header), header=True)
     body = "\n".join(_row(r) for r in rows)
     return f"<table>\n<thead>{head}</thead>\n<tbody>\n{body}\n</tbody>\n</table>"
@@ -77,14 +77,14 @@ def metrics_table(summary: Mapping) -> str:
                              ("train_ssim", "SSIM, training views", ".4f"),
                              ("holdout_ssim", "SSIM, holdout views", ".4f")):
         pair = summary.get(key) or {}
-        agreement.append([label, _number(pair.get("before"), spec), _number(pair.get("after"), spec)])
+        agreement.append([label, format_number(pair.get("before"), spec), format_number(pair.get("after"), spec)])
     run = [["method", escape(str(summary.get("method") or _MISSING))],
            ["iterations", _integer(summary.get("iterations"))],
            ["renders", _integer(summary.get("renders"))],
            ["samples rendered", _integer(summary.get("samples_rendered"))],
-           ["wall time (s)", _number(summary.get("wall_s"), ".1f")]]
-    return (_table(["metric", "before fit", "after fit"], agreement) + "\n"
-            + _table(["run", ""], run))
+           ["wall time (s)", format_number(summary.get("wall_s"), ".1f")]]
+    return (html_table(["metric", "before fit", "after fit"], agreement) + "\n"
+            + html_table(["run", ""], run))
 
 
 def parameter_table(parameters: Mapping[str, Mapping]) -> str:
@@ -114,16 +114,16 @@ def parameter_table(parameters: Mapping[str, Mapping]) -> str:
                                   for k in ("stderr", "initial", "truth"))
         for i in range(n):
             label = escape(name if n == 1 else f"{name}[{i}]")
-            fitted = _number(value[i])
+            fitted = format_number(value[i])
             if np.isfinite(stderr[i]):
-                fitted += f" ± {_number(stderr[i], '.2g')}"
-            row = [label, escape(info.get("unit") or ""), _number(initial[i]), fitted]
+                fitted += f" ± {format_number(stderr[i], '.2g')}"
+            row = [label, escape(info.get("unit") or ""), format_number(initial[i]), fitted]
             if with_truth:
                 error = value[i] - truth[i]
-                row += [_number(truth[i]), _number(error, "+.3g"),
-                        _number(error / stderr[i] if stderr[i] > 0 else np.nan, "+.2f")]
+                row += [format_number(truth[i]), format_number(error, "+.3g"),
+                        format_number(error / stderr[i] if stderr[i] > 0 else np.nan, "+.2f")]
             rows.append(row)
-    return _table(header, rows)
+    return html_table(header, rows)
 
 
 def figure(src: str, caption: str) -> str:
@@ -151,7 +151,7 @@ def view_section(name: str, holdout: bool, src: str, rmse_before: float,
     kind = "holdout" if holdout else "train"
     return (f'<section class="view {kind}">\n'
             f'<h3>{escape(name)} <span class="tag">{kind}</span></h3>\n'
-            f"<p>RMSE {_number(rmse_before)} before the fit, {_number(rmse_after)} after."
+            f"<p>RMSE {format_number(rmse_before)} before the fit, {format_number(rmse_after)} after."
             f"{' Not used by the fit.' if holdout else ''}</p>\n"
             + figure(src, f"{name} ({kind}): photograph, rendering and log10 error, "
                           "before (top) and after (bottom) the fit")

@@ -27,16 +27,16 @@ def posterior_table(summary: Mapping) -> str:
         fit = e.get("fit") or {}
         value, stderr = (np.broadcast_to(as_vector(fit.get(k)), (n,)) for k in ("value", "stderr"))
         for i in range(n):
-            fitted = html._number(value[i])
+            fitted = html.format_number(value[i])
             if np.isfinite(stderr[i]):
-                fitted += f" ± {html._number(stderr[i], '.2g')}"
+                fitted += f" ± {html.format_number(stderr[i], '.2g')}"
             rows.append([escape(name if n == 1 else f"{name}[{i}]"), escape(e.get("unit") or ""),
-                         html._number(cols["mean"][i]), html._number(cols["sd"][i], ".3g"),
-                         html._number(cols["q05"][i]), html._number(cols["q95"][i]),
-                         html._number(cols["ess"][i], ".0f"), html._number(cols["tau"][i], ".3g"),
-                         html._number(cols["r_hat"][i], ".3f"), fitted,
-                         html._number(cols["truth"][i])])
-    return html._table(header, rows)
+                         html.format_number(cols["mean"][i]), html.format_number(cols["sd"][i], ".3g"),
+                         html.format_number(cols["q05"][i]), html.format_number(cols["q95"][i]),
+                         html.format_number(cols["ess"][i], ".0f"), html.format_number(cols["tau"][i], ".3g"),
+                         html.format_number(cols["r_hat"][i], ".3f"), fitted,
+                         html.format_number(cols["truth"][i])])
+    return html.html_table(header, rows)
 
 
 def _run_table(summary: Mapping) -> str:
@@ -45,7 +45,7 @@ def _run_table(summary: Mapping) -> str:
     rows = [[escape(k.replace("_", " ")), escape(str(summary.get(k)))] for k in keys]
     noise = summary.get("noise") or {}
     rows += [[escape(f"noise: {k.replace('_', ' ')}"), escape(str(v))] for k, v in noise.items()]
-    return html._table(["run", ""], rows)
+    return html.html_table(["run", ""], rows)
 
 
 def write_sample_report(folder: str | Path, summary: Mapping, chain: np.ndarray,

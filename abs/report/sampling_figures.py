@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from abs.io.images import auto_exposure, tonemap
-from abs.report.figures import _save
+from abs.report.figures import save_figure
 
 __all__ = ["plot_corner", "plot_walker_traces", "plot_predictive"]
 
@@ -64,7 +64,7 @@ def plot_corner(path: Path, samples: np.ndarray, labels: Sequence[str],
                 ax.set_xlabel(labels[j], fontsize="small")
             if j == 0 and i > 0:
                 ax.set_ylabel(labels[i], fontsize="small")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_walker_traces(path: Path, chain: np.ndarray, labels: Sequence[str], burn_in: int) -> None:
@@ -83,7 +83,7 @@ def plot_walker_traces(path: Path, chain: np.ndarray, labels: Sequence[str], bur
         ax.axvspan(0, burn_in, color="tab:orange", alpha=0.15, lw=0)
         ax.set_ylabel(labels[k], fontsize="small")
     axes[-1].set_xlabel("step (shaded: burn-in)")
-    _save(fig, path)
+    save_figure(fig, path)
 
 
 def plot_predictive(path: Path, name: str, holdout: bool, photograph: np.ndarray,
@@ -103,4 +103,4 @@ def plot_predictive(path: Path, name: str, holdout: bool, photograph: np.ndarray
     for ax in axes:
         ax.set_axis_off()
     fig.colorbar(spread, ax=axes[2], label="radiance sd", shrink=0.8)
-    _save(fig, path)
+    save_figure(fig, path)

@@ -22,7 +22,7 @@ from abs.params.names import Parameter, parameter_specs
 from abs.scene.materials.base import Material
 from abs.scene.scene import Scene
 
-__all__ = ["write_scene"]
+__all__ = ["write_scene", "scene_table"]
 
 
 def write_scene(scene: Scene, path: str | Path, values: Mapping[str, object] | None = None) -> Path:
@@ -55,7 +55,7 @@ def write_scene(scene: Scene, path: str | Path, values: Mapping[str, object] | N
     """
     out = Path(path).resolve()
     checked = _checked_values(scene, values or {})
-    data = _scene_table(scene, out.parent, checked)
+    data = scene_table(scene, out.parent, checked)
     note = f"Written by abs from {scene.source}. Paths are relative to this file."
     if checked:
         note += f" Values replaced: {', '.join(sorted(checked))}."
@@ -122,7 +122,7 @@ def _transform(table: dict, matrix: np.ndarray) -> None:
         table["to_world"] = np.asarray(matrix, dtype=np.float64).tolist()
 
 
-def _scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
+def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     env = scene.environment
     environment = {"file": _relative(env.file, folder),
                    "scale": values.get("environment.scale", float(env.scale))}
