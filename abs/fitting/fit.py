@@ -218,20 +218,22 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     if method == "lm":
         problem = train_problem(settings.downsample)
 
+        def weighted_jacobian(J, dtheta):  # d(r / sigma)/dz, with the priors' rows below
+            J = J * dtheta / sigma
+            return np.concatenate([J, np.diag(dtheta / prior_sd)[has_prior]]) if has_prior.any() else J
+
         def evaluate(z, iteration, seeds=(settings.seed, None)):
             theta, dtheta = vector.to_physical(z), vector.derivative(z)
             r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
             loss = float(np.sqrt(np.mean(r ** 2)))
-            r, J = r / sigma, J * dtheta / sigma
+            r = r / sigma
             if has_prior.any():
                 r = np.concatenate([r, ((theta - prior_mean) / prior_sd)[has_prior]])
-                J = np.concatenate([J, (np.diag(dtheta / prior_sd))[has_prior]])
-            return r, J, loss
+            return r, weighted_jacobian(J, dtheta), loss
 
         def second_jacobian(z, seed):
-            theta, dtheta = vector.to_physical(z), vector.derivative(z)
-            J = problem.jacobian(theta, settings.spp, seed) * dtheta / sigma
-            return np.concatenate([J, np.diag(dtheta / prior_sd)[has_prior]]) if has_prior.any() else J
+            theta = vector.to_physical(z)
+            return weighted_jacobian(problem.jacobian(theta, settings.spp, seed), vector.derivative(z))
 
         n_res = problem.n_residuals + int(has_prior.sum())
         # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.

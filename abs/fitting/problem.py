@@ -34,6 +34,13 @@ __all__ = ["FitProblem", "AD_SAMPLES_PER_BATCH"]
 AD_SAMPLES_PER_BATCH = 1 << 18
 
 
+def _view_seed(seed: int, view: int) -> int:
+    """The render seed of view number ``view`` for a call seeded ``seed`` (spp batches add 0, 1,
+    ...): distinct per view, and the same in every method, so residuals, Jacobians and gradients
+    seeded alike see the same samples."""
+    return seed * 1009 + view * 101
+
+
 @dataclass
 class RenderCounter:
     """How much rendering a fit used."""
@@ -133,13 +140,13 @@ class FitProblem:
         """
         rs, js = [], []
         for k, obs in enumerate(self.observations):
-            view_seed = seed * 1009 + k * 101
+            view_seed = _view_seed(seed, k)
             if not jacobian:
                 r, _ = self._compare(obs, self.render(obs, theta, spp, view_seed))
                 rs.append(r)
                 continue
             image, jac = self._render_with_jacobian(
-                obs, theta, spp, view_seed if jacobian_seed is None else jacobian_seed * 1009 + k * 101)
+                obs, theta, spp, view_seed if jacobian_seed is None else _view_seed(jacobian_seed, k))
             if jacobian_seed is not None and jacobian_seed != seed:
                 image = self.render(obs, theta, spp, view_seed)
             r, live = self._compare(obs, image)
@@ -158,7 +165,7 @@ class FitProblem:
         """
         js = []
         for k, obs in enumerate(self.observations):
-            image, jac = self._render_with_jacobian(obs, theta, spp, seed * 1009 + k * 101)
+            image, jac = self._render_with_jacobian(obs, theta, spp, _view_seed(seed, k))
             live = self._clamp(image)[1][obs.mask].ravel()
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(js)
@@ -198,7 +205,7 @@ class FitProblem:
         total, grad = 0.0, np.zeros(self.vector.size)
         for k, obs in enumerate(self.observations):
             cam = obs.camera
-            image = self.render(obs, theta, spp, seed * 1009 + k * 101)
+            image = self.render(obs, theta, spp, _view_seed(seed, k))
             r, _ = self._compare(obs, image)
             total += 0.5 * float(r @ r)
             clamped, live = self._clamp(image)
@@ -206,7 +213,7 @@ class FitProblem:
             weight = mi.Float(residual.astype(np.float32).ravel())
             for b, n in enumerate(self._batches(cam, spp)):
                 attached = self._attach(theta)
-                rendered = self.compiled.render(cam, spp=n, seed=jacobian_seed * 1009 + k * 101 + b,
+                rendered = self.compiled.render(cam, spp=n, seed=_view_seed(jacobian_seed, k) + b,
                                                 max_depth=self.max_depth)
                 self.counter.add(cam, n)
                 dr.backward(dr.sum(rendered.array * weight) * (n / spp))
