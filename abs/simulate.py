@@ -64,12 +64,17 @@ def add_sensor_noise(image: np.ndarray, shot_noise: float, read_noise: float,
 def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width: int = 320,
                      height: int = 240, fov_deg: float = 30.0, spp: int = 512,
                      n_holdout: int | None = None, shot_noise: float = 0.0, read_noise: float = 0.0,
-                     seed: int = 0, on_view: Callable[[str], None] | None = None):
+                     seed: int = 0, on_view: Callable[[str], None] | None = None,
+                     render: Callable | None = None):
     """Render a synthetic capture folder of ``scene`` (see :func:`place_cameras`).
 
     Writes ``cameras.json``, one EXR per view and ``simulation.json`` (settings and the true value
     of every scalar parameter). The last ``n_holdout`` views are holdout views (default: 1 when
     there are at least 3 views).
+
+    ``render(compiled, camera, spp, seed) -> (H, W, 3) ndarray`` replaces abs's renderer for the
+    photographs (before noise): benchmarks make photographs with physics that the fitted model
+    only approximates (:mod:`abs.render.sensor_truth`, :mod:`abs.render.medium_truth`).
 
     Returns
     -------
@@ -87,7 +92,9 @@ def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width
     for i, view in enumerate(views):
         view["holdout"] = i >= n_cameras - n_holdout
         camera = Camera(np.asarray(view["K"]), np.asarray(view["R"]), np.asarray(view["t"]), width, height)
-        image = compiled.render(camera, spp=spp, seed=10_000 + seed * 1000 + i).numpy()
+        view_seed = 10_000 + seed * 1000 + i
+        image = (compiled.render(camera, spp=spp, seed=view_seed).numpy() if render is None
+                 else np.asarray(render(compiled, camera, spp, view_seed), np.float32))
         images[view["name"]] = add_sensor_noise(image, shot_noise, read_noise, rng)
         if on_view is not None:
             on_view(view["name"])

@@ -30,9 +30,10 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     camera = _camera(compiled)
     reference = compiled.render(camera, spp=2, seed=5).numpy()
     pool = [c for e in effects().values() for c in e.candidates(scene, compiled)]
-    assert {"vignetting", "camera_response", "stray_light", "env_distance"} <= {c.effect for c in pool}
+    assert {"vignetting", "camera_response", "stray_light", "env_distance",
+            "subsurface"} <= {c.effect for c in pool}
     if "glass" in scene.materials:
-        assert "absorption" in {c.effect for c in pool}
+        assert {"absorption", "surface_roughness"} <= {c.effect for c in pool}
     else:
         assert "pose" in {c.effect for c in pool}
     extended = extend_scene(scene, tuple(pool), {}, tmp_path / "extended.toml")
@@ -153,3 +154,24 @@ def test_null_capture_gives_an_empty_verdict(diagnosis_scene, tmp_path):
                       only=_EFFECTS.split(","))
     assert result.verdict == [], [(s.candidate.label, s.statistic) for s in result.candidates]
     assert result.to_json()["findings"] == []
+
+
+@pytest.mark.slow
+def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_scene, tmp_path):
+    """Roughness changes images only to second order at 0, so the score test is blind to it; the
+    short fit from a probe value must score rough glass far above smooth glass."""
+    from abs.diagnosis.score import score_candidates
+    from abs.fitting import FitSettings
+
+    settings = FitSettings(spp=8, downsample=1, max_iterations=4, refinement_steps=1, eval_spp=32)
+    scene = load_scene(diagnosis_scene)
+    compiled = compile_scene(scene)
+    (candidate,) = effects()["surface_roughness"].candidates(scene, compiled)
+    extended = extend_scene(scene, (candidate,), {}, tmp_path / "extended.toml")
+    statistics = {}
+    for label, truth in (("rough", {"glass.roughness": [0.15]}), ("smooth", {})):
+        capture = _capture(diagnosis_scene, tmp_path / label, truth)
+        (score,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings)
+        assert score.method == "short fit"
+        statistics[label] = score.predicted_bic_gain
+    assert statistics["rough"] > 0 > statistics["smooth"], statistics

@@ -5,6 +5,8 @@ Two scenes, built on the fly:
 
 - ``sphere``: a glass sphere on a cloth in front of a printed checkerboard (the test scenes'
   layout) in a bright room (``tests/conftest.py``'s ``make_soft_env``); fitted: ``environment.scale``.
+- ``cloth``: the sphere scene with the cloth's reflectance fitted as well (a scattering cloth
+  reflects a different fraction of light than its nominal reflectance, which a user would fit);
 - ``box``: a painted box and a clear glass sphere on the cloth in front of the checkerboard;
   fitted: ``environment.scale`` and the paint's reflectance.
 """
@@ -21,34 +23,95 @@ __all__ = ["Case", "CASES", "QUICK", "build_scene"]
 
 @dataclass(frozen=True)
 class Case:
-    """A capture with hidden effects: ``truth`` overrides TOML fields of the given scene."""
+    """A capture with hidden effects.
+
+    ``truth`` overrides TOML fields of the given scene (parameter name -> true value): the hidden
+    effect rendered by abs's own model. ``photographs`` names an independent truth renderer of
+    :data:`TRUTH_RENDERERS` and its settings: the hidden effect made by physics that abs's model
+    only approximates (as in real photographs).
+    """
 
     name: str
     scene: str
     hidden: tuple[str, ...]            # effect names expected in the verdict, most important first
-    truth: dict = field(default_factory=dict)   # parameter name -> true value
+    truth: dict = field(default_factory=dict)
+    photographs: tuple[str, dict] | None = None
+
+    def describe_truth(self) -> str:
+        if self.photographs is None:
+            return ""
+        kind, settings = self.photographs
+        return f"{kind}(" + ", ".join(f"{k}={v}" for k, v in settings.items()) + ")"
+
+
+def _model(compiled, camera, spp, seed):
+    return compiled.render(camera, spp=spp, seed=seed).numpy()
+
+
+def _natural_vignetting(compiled, camera, spp, seed, strength):
+    from abs.render.sensor_truth import natural_vignetting
+
+    return natural_vignetting(_model(compiled, camera, spp, seed), camera, strength)
+
+
+def _veiling_glare(compiled, camera, spp, seed, fraction, sigma_frac, floor):
+    from abs.render.sensor_truth import veiling_glare
+
+    return veiling_glare(_model(compiled, camera, spp, seed), fraction, sigma_frac * camera.width, floor)
+
+
+def _filmic_response(compiled, camera, spp, seed, white):
+    from abs.render.sensor_truth import filmic_response
+
+    return filmic_response(_model(compiled, camera, spp, seed), white)
+
+
+def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
+    from abs.render.medium_truth import render_with_medium
+
+    return render_with_medium(compiled, camera, "cloth", mean_free_path, spp=spp, seed=seed)
+
+
+#: Independent truth renderers: ``f(compiled, camera, spp, seed, **settings) -> (H, W, 3)``.
+TRUTH_RENDERERS = {
+    "natural_vignetting": _natural_vignetting,   # cos^4 law, not abs's polynomial
+    "veiling_glare": _veiling_glare,             # blurred image + floor, not a constant offset
+    "filmic_response": _filmic_response,         # Reinhard curve, not a power law
+    "scattering_cloth": _scattering_cloth,       # volumetric slab in volpath, not a spread exit point
+}
 
 
 CASES = [
     Case("sphere-absorption", "sphere", ("absorption",), {"glass.absorption": [3.0, 6.0, 10.0]}),
-    Case("sphere-vignetting", "sphere", ("vignetting",), {"sensor.vignetting": [-0.8, 0.0]}),
-    Case("sphere-stray_light", "sphere", ("stray_light",), {"sensor.stray_light": [0.04, 0.04, 0.045]}),
+    Case("sphere-vignetting", "sphere", ("vignetting",),
+         photographs=("natural_vignetting", {"strength": 0.6})),
+    Case("sphere-stray_light", "sphere", ("stray_light",),
+         photographs=("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
     Case("sphere-null", "sphere", ()),
     Case("sphere-absorption+vignetting", "sphere", ("absorption", "vignetting"),
-         {"glass.absorption": [3.0, 6.0, 10.0], "sensor.vignetting": [-0.8, 0.0]}),
-    Case("box-pose", "box", ("pose",), {"box.pose": [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]}),
-    Case("box-pose-1cm", "box", ("pose",), {"box.pose": [0.01, 0.0, -0.008, 0.0, 0.1, 0.0]}),
-    Case("box-camera_response", "box", ("camera_response",), {"sensor.response": [0.9, 0.9, 0.9]}),
+         {"glass.absorption": [3.0, 6.0, 10.0]}, ("natural_vignetting", {"strength": 0.6})),
+    Case("sphere-camera_response", "sphere", ("camera_response",),
+         photographs=("filmic_response", {"white": 3.0})),
+    Case("sphere-env_distance", "sphere", ("env_distance",), {"environment.inverse_distance": [1.0]}),
+    Case("sphere-surface_roughness", "sphere", ("surface_roughness",), {"glass.roughness": [0.15]}),
+    Case("cloth-subsurface", "cloth", ("subsurface",),
+         photographs=("scattering_cloth", {"mean_free_path": 0.002})),
+    Case("sphere-subsurface", "sphere", ("subsurface",), {"cloth.subsurface": [0.015]}),
+    Case("box-pose", "box", ("pose",), {"box.pose": [0.01, 0.0, -0.008, 0.0, 0.1, 0.0]}),
+    Case("box-pose-4mm", "box", ("pose",), {"box.pose": [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]}),
+    Case("box-camera_response", "box", ("camera_response",),
+         photographs=("filmic_response", {"white": 3.0})),
+    Case("box-vignetting", "box", ("vignetting",), photographs=("natural_vignetting", {"strength": 0.6})),
     Case("box-null", "box", ()),
     Case("box-absorption+stray_light", "box", ("absorption", "stray_light"),
-         {"glass.absorption": [3.0, 6.0, 10.0], "sensor.stray_light": [0.04, 0.04, 0.045]}),
-    Case("box-vignetting", "box", ("vignetting",), {"sensor.vignetting": [-0.8, 0.0]}),
-    Case("sphere-camera_response", "sphere", ("camera_response",), {"sensor.response": [0.9, 0.9, 0.9]}),
-    Case("sphere-env_distance", "sphere", ("env_distance",), {"environment.inverse_distance": [2.0]}),
+         {"glass.absorption": [3.0, 6.0, 10.0]},
+         ("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
 ]
 
-#: The quick default: one case per effect on either scene, a two-effect case and both nulls.
-QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "box-pose",
+#: The quick default: every effect once, a two-effect case and both nulls.
+QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
+         "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
+         "box-pose",
          "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
 
 _SPHERE = """
@@ -126,8 +189,9 @@ def build_scene(root: Path, kind: str) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     if not (root / "env.exr").exists():
         _assets(root)
-    text = _SPHERE + (_BOX + '\n[fit]\nparameters = ["environment.scale", "paint.reflectance"]\n'
-                      if kind == "box" else '\n[fit]\nparameters = ["environment.scale"]\n')
+    text = _SPHERE + {"box": _BOX + '\n[fit]\nparameters = ["environment.scale", "paint.reflectance"]\n',
+                      "sphere": '\n[fit]\nparameters = ["environment.scale"]\n',
+                      "cloth": '\n[fit]\nparameters = ["environment.scale", "cloth.reflectance"]\n'}[kind]
     path = root / f"{kind}.toml"
     path.write_text(text)
     return path

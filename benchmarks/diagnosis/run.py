@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cases import CASES, QUICK, build_scene  # noqa: E402
+from cases import CASES, QUICK, TRUTH_RENDERERS, build_scene  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
@@ -47,9 +47,14 @@ def run_case(case, root: Path, args) -> dict:
     folder = root / case.name
     scene_path = build_scene(root / case.scene, case.scene)
     truth_path = _truth_scene(scene_path, case, folder / "truth.toml")
+    render = None
+    if case.photographs is not None:
+        kind, extra = case.photographs
+        def render(compiled, camera, spp, seed):
+            return TRUTH_RENDERERS[kind](compiled, camera, spp, seed, **extra)
     simulate_capture(load_scene(truth_path), folder / "capture", n_cameras=args.views,
                      width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
-                     read_noise=0.003, seed=3)
+                     read_noise=0.003, seed=3, render=render)
     settings = FitSettings(spp=args.spp, downsample=args.downsample, max_iterations=args.iterations,
                            refinement_steps=args.refinement, eval_spp=args.eval_spp)
     t0 = time.perf_counter()
@@ -65,7 +70,7 @@ def run_case(case, root: Path, args) -> dict:
             "all_found": set(case.hidden) <= set(out["verdict"]),
             "exact": sorted(out["verdict"]) == sorted(case.hidden),
             "holdout_rmse_before": base["holdout_rmse"], "holdout_rmse_after": final_holdout,
-            "truth": case.truth, "recovered": recovered,
+            "truth": case.truth, "truth_renderer": case.describe_truth(), "recovered": recovered,
             "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
 
 
@@ -93,6 +98,10 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
     for r in rows:
         rec = "; ".join(f"{p}: {_fmt(r['recovered'][p])} vs {_fmt(t)}" if p in r["recovered"]
                         else f"{p}: not found (truth {_fmt(t)})" for p, t in r["truth"].items())
+        if r.get("truth_renderer"):
+            found = "; ".join(f"{p}: {_fmt(v)}" for p, v in r["recovered"].items()
+                              if p not in r["truth"]) or "nothing fitted"
+            rec = "; ".join(x for x in (rec, f"{found} vs photographs by {r['truth_renderer']}") if x)
         lines.append(f"| {r['case']} | {', '.join(r['hidden']) or '(none)'} | "
                      f"{', '.join(r['verdict']) or '(empty)'} | {r['holdout_rmse_before']:.4g} -> "
                      f"{r['holdout_rmse_after']:.4g} | {rec or '-'} | {r['wall_s']:.0f} |")

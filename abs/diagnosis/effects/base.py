@@ -74,6 +74,11 @@ class Effect(ABC):
     def parameters(self, target: str) -> tuple[str, ...]:
         """Parameter names the effect releases to the fit."""
 
+    def probe(self, target: str) -> dict[str, list]:
+        """Values a short fit starts from when :attr:`zero_null_derivative` is set (at the null
+        value the fit would have no slope to follow); a small, plausible amount of the effect."""
+        return {}
+
     @abstractmethod
     def explain(self, target: str, values: dict[str, np.ndarray]) -> str:
         """One or two sentences, in physical terms, on what the fitted ``values`` mean."""
