@@ -209,8 +209,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         step(f"round {r + 1}: control refit")
         round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
                                    work / f"round{r + 1}_control.toml")
-        scatter = max(scatter, abs(round_.control.crossed_rmse("holdout")
-                                   - current.crossed_rmse("holdout")))
+        scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
         for i, s in enumerate(eligible):
             if i and _clear_winner(round_.trials[0], s):
                 break

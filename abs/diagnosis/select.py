@@ -1,20 +1,14 @@
 """Fit extended models fully and decide whether an effect earns its place.
 
-Squared errors are measured *crossed*: each fitted model renders every view twice with
-independent random numbers, ``a`` and ``b``, and a pixel's error is ``(a - p) . (b - p)`` (``p``
-the photograph). Its expectation is the squared error of the noise-free rendering (plus the
-photograph's noise), whereas ``|a - p|^2`` adds the rendering's own Monte-Carlo variance, so a
-model that merely renders with less noise (rough glass lets light sampling reach through it)
-would look better fitted. Both models use the same two seeds (paired comparisons).
+A candidate is accepted over a reference model only if both hold:
 
-A candidate is accepted over a reference model only if all hold:
-
-- **holdout**: the holdout views' crossed error falls by more than its noise: three standard
-  errors of the mean per-pixel drop, and more than the scatter of a refit, measured as how far
-  the holdout error moved when the reference model alone was fitted again with the same
-  settings (the *control* fit); and the holdout RMSE of the fit's own evaluation falls too.
+- **holdout**: the holdout views' RMSE falls by more than its noise. The noise has two parts: the
+  pixel noise of the paired per-pixel difference of squared errors (both renderings use the same
+  random numbers, so their own Monte-Carlo noise largely cancels), three standard errors of its
+  mean; and the scatter of a refit, measured as how far the holdout RMSE moved when the
+  reference model alone was fitted again with the same settings (the *control* fit).
 - **BIC** on the training views prefers it: ``M ln(RSS_ext / RSS_ref) + k ln M < 0``, ``k`` the
-  added scalars, ``M`` the compared residuals and ``RSS`` the crossed sums.
+  added scalars and ``M`` the compared residuals.
 
 The control fit doubles as the reference: the extended model and the control start from the same
 values and run the same optimiser, so a better-converged fit of the old parameters cannot pass
@@ -31,17 +25,11 @@ import numpy as np
 from abs.diagnosis.effects import Candidate, effect
 from abs.diagnosis.model import extend_scene
 from abs.fitting import FitResult, FitSettings, fit
-from abs.fitting.fit import prepare
-from abs.fitting.observations import observe
-from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem
 
 __all__ = ["ModelFit", "Comparison", "fit_model", "compare", "HOLDOUT_Z"]
 
 #: Standard errors by which the paired holdout improvement must exceed zero.
 HOLDOUT_Z = 3.0
-#: Seeds of the two independent evaluation renders of every model (shared by all models).
-CROSSED_SEEDS = (7001, 7002)
 
 
 @dataclass
@@ -51,7 +39,6 @@ class ModelFit:
     candidates: tuple[Candidate, ...]
     scene: object
     result: FitResult
-    crossed: dict[str, np.ndarray]   # view name -> per-pixel crossed squared error (see module)
 
     @property
     def values(self) -> dict[str, np.ndarray]:
@@ -67,32 +54,6 @@ class ModelFit:
     def n_train(self) -> int:
         return 3 * sum(int(v.mask.sum()) for v in self.result.views if not v.holdout)
 
-    def crossed_errors(self, split: str) -> np.ndarray:
-        """Per-pixel crossed squared errors (RGB summed) of the ``split`` views, concatenated."""
-        return np.concatenate([self.crossed[v.name] for v in self.result.views
-                               if v.holdout == (split == "holdout")])
-
-    def crossed_rmse(self, split: str) -> float:
-        """RMSE of the noise-free rendering, estimated from the crossed errors (radiance)."""
-        return float(np.sqrt(max(self.crossed_errors(split).mean(), 0.0) / 3.0))
-
-
-def crossed_errors(scene, capture, values: dict, settings: FitSettings) -> dict[str, np.ndarray]:
-    """``(a - p) . (b - p)`` per pixel of every view (RGB summed; masked pixels only), ``a`` and
-    ``b`` renders of ``scene`` at ``values`` with the :data:`CROSSED_SEEDS`, at full resolution
-    and the fits' evaluation samples per pixel."""
-    names = tuple(values)
-    _, compiled, capture, names = prepare(scene, capture, names)
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    theta = np.concatenate([np.asarray(values[n], float).ravel() for n in names])
-    problem = FitProblem(compiled, vector, [observe(v, 1) for v in capture.views], settings.clamp)
-    spp = settings.eval_spp or compiled.scene.render.spp
-    out = {}
-    for i, o in enumerate(problem.observations):
-        a, b = (problem.render(o, theta, spp, seed + 7 * i) for seed in CROSSED_SEEDS)
-        out[o.name] = np.sum((a - o.photograph) * (b - o.photograph), axis=-1)[o.mask]
-    return out
-
 
 def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, settings: FitSettings,
               path: Path) -> ModelFit:
@@ -104,8 +65,7 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
         settings = replace(settings, downsample=1)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     result = fit(extended, capture, names, settings, initial=initial)
-    return ModelFit(tuple(candidates), extended, result,
-                    crossed_errors(extended, capture, result.values, settings))
+    return ModelFit(tuple(candidates), extended, result)
 
 
 @dataclass(frozen=True)
@@ -128,9 +88,16 @@ class Comparison:
                 "added_scalars": self.added_scalars, "accepted": self.accepted, "reason": self.reason}
 
 
-def _paired_holdout(reference: ModelFit, extended: ModelFit) -> tuple[float, float]:
-    """Mean and standard error of the per-pixel drop in crossed squared error on the holdout views."""
-    d = reference.crossed_errors("holdout") - extended.crossed_errors("holdout")
+def _paired_holdout(reference: FitResult, extended: FitResult) -> tuple[float, float]:
+    """Mean and standard error of the per-pixel drop in squared error on the holdout views."""
+    after = {v.name: v.after for v in extended.views}
+    drops = []
+    for v in reference.views:
+        if v.holdout:
+            e0 = np.sum(np.square(v.after - v.photograph), axis=-1)[v.mask]
+            e1 = np.sum(np.square(after[v.name] - v.photograph), axis=-1)[v.mask]
+            drops.append(e0 - e1)
+    d = np.concatenate(drops)
     return float(d.mean()), float(d.std(ddof=1) / np.sqrt(d.size))
 
 
@@ -140,30 +107,27 @@ def compare(reference: ModelFit, extended: ModelFit, refit_scatter: float) -> Co
     Parameters
     ----------
     refit_scatter : float
-        How much the holdout crossed RMSE moves between two fits of one model (radiance units).
+        How much the holdout RMSE moves between two fits of one model (radiance units).
     """
     h0, h1 = reference.rmse("holdout"), extended.rmse("holdout")
-    c0, c1 = reference.crossed_rmse("holdout"), extended.crossed_rmse("holdout")
-    mean, se = _paired_holdout(reference, extended)
+    mean, se = _paired_holdout(reference.result, extended.result)
     z = mean / se if se > 0 else (np.inf if mean > 0 else 0.0)
     m = extended.n_train()
     k = extended.result.vector.size - reference.result.vector.size
-    rss0 = max(float(np.sum(reference.crossed_errors("train"))), 1e-300)
-    rss1 = max(float(np.sum(extended.crossed_errors("train"))), 1e-300)
+    rss0, rss1 = m * reference.rmse("train") ** 2, m * extended.rmse("train") ** 2
     delta_bic = m * float(np.log(rss1 / rss0)) + k * float(np.log(m))
-    holdout_ok = z > HOLDOUT_Z and c0 - c1 > refit_scatter and h1 < h0
+    holdout_ok = z > HOLDOUT_Z and h0 - h1 > refit_scatter
     bic_ok = delta_bic < 0
     if holdout_ok and bic_ok:
-        reason = (f"holdout RMSE {h0:.4g} -> {h1:.4g} (noise-free estimate {c0:.4g} -> {c1:.4g}; "
-                  f"{HOLDOUT_Z:g} sigma margin passed: z = {z:.1f}, refit scatter "
-                  f"{refit_scatter:.2g}) and BIC prefers it (delta {delta_bic:.1f})")
+        reason = (f"holdout RMSE {h0:.4g} -> {h1:.4g} ({HOLDOUT_Z:g} sigma margin passed: "
+                  f"z = {z:.1f}, refit scatter {refit_scatter:.2g}) and BIC prefers it "
+                  f"(delta {delta_bic:.1f})")
     else:
         failed = []
         if not holdout_ok:
-            failed.append(f"holdout RMSE {h0:.4g} -> {h1:.4g} (noise-free estimate {c0:.4g} -> "
-                          f"{c1:.4g}) is not an improvement beyond noise (z = {z:.1f}, needs > "
-                          f"{HOLDOUT_Z:g}, a drop > refit scatter {refit_scatter:.2g} and a lower "
-                          f"holdout RMSE)")
+            failed.append(f"holdout RMSE {h0:.4g} -> {h1:.4g} is not an improvement beyond noise "
+                          f"(z = {z:.1f}, needs > {HOLDOUT_Z:g} and a drop > refit scatter "
+                          f"{refit_scatter:.2g})")
         if not bic_ok:
             failed.append(f"BIC does not prefer it (delta {delta_bic:+.1f})")
         reason = "; ".join(failed)
