@@ -107,6 +107,18 @@ def _inside(vector: ParameterVector, theta: np.ndarray, candidate: slice) -> np.
     return theta
 
 
+def _training_problem(scene, capture, names, factor: int, settings: FitSettings):
+    """``(compiled, vector, theta0, problem)``: ``scene`` compiled with ``names`` as its parameters,
+    their current values ``theta0`` (exactly the null values, not clipped) and the training views
+    downsampled by ``factor``."""
+    _, compiled, capture, names = prepare(scene, capture, names)
+    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    theta0 = np.concatenate([compiled.get(n) for n in names])
+    problem = FitProblem(compiled, vector, [observe(v, factor) for v in capture.train_views],
+                         settings.clamp)
+    return compiled, vector, theta0, problem
+
+
 def score_candidates(scene, capture, base_parameters, candidates: list[Candidate],
                      settings: FitSettings, full_resolution: bool = False) -> list[CandidateScore]:
     """Score candidates against the current model, sharing one Jacobian among them.
@@ -139,11 +151,7 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
             groups.setdefault(factor, []).append(c)
     for factor, group in groups.items():
         names = tuple(base_parameters) + tuple(p for c in group for p in c.parameters)
-        _, compiled, capture, names = prepare(scene, capture, names)
-        vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-        theta0 = np.concatenate([compiled.get(n) for n in names])  # exactly the null, not clipped
-        problem = FitProblem(compiled, vector, [observe(v, factor) for v in capture.train_views],
-                             settings.clamp)
+        compiled, vector, theta0, problem = _training_problem(scene, capture, names, factor, settings)
         r, J = problem.residuals(theta0, SCORE_SPP_FACTOR * settings.spp, settings.seed + 501,
                                  jacobian=True,
                                  jacobian_seed=settings.seed + 502)
@@ -172,21 +180,17 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
 
 def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
     """Scan the candidate's amount along its probe direction (``PROBE_SCALES`` times
-    :meth:`Effect.probe`) and compare the training residuals at the best amount and at the null,
-    all rendered with the same random numbers (paired: their Monte-Carlo noise largely cancels).
+    :meth:`Effect.probe`) and compare the crossed training errors at the best amount and at the
+    null, all from the same two seeds (paired: their Monte-Carlo noise largely cancels).
 
     A scan rather than a gradient fit: at the null the slope vanishes, and these effects'
     gradients (a spread exit point, a rough interface) are noisy at the few samples a diagnosis
     can afford, so a short gradient fit wanders; a handful of paired renders does not.
     """
-    e = effect(candidate.effect)
     names = candidate.parameters
-    _, compiled, capture, names = prepare(scene, capture, names)
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    null = np.concatenate([compiled.get(n) for n in names])
-    probe = np.concatenate([np.asarray(e.probe(candidate.target)[n], float).ravel() for n in names])
-    problem = FitProblem(compiled, vector, [observe(v, settings.downsample) for v in capture.train_views],
-                         settings.clamp)
+    _, vector, null, problem = _training_problem(scene, capture, names, settings.downsample, settings)
+    probe = effect(candidate.effect).probe(candidate.target)
+    probe = np.concatenate([np.asarray(probe[n], float).ravel() for n in names])
     spp = SHORT_FIT_SPP_FACTOR * settings.spp
 
     def crossed(theta) -> np.ndarray:
@@ -208,6 +212,5 @@ def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
     m = problem.n_residuals
     # A paired z test of the drop in crossed error over pixels; z^2 is on the chi-square scale of
     # the score statistics (one scalar).
-    statistic = z * z
-    return CandidateScore(candidate, max(statistic, 0.0), int(vector.size), m, "short fit",
+    return CandidateScore(candidate, z * z, int(vector.size), m, "short fit",
                           vector.split(best_theta))

@@ -111,8 +111,7 @@ CASES = [
 #: The quick default: every effect once, a two-effect case and both nulls.
 QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
-         "box-pose",
-         "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
+         "box-pose", "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
 
 _SPHERE = """
 [render]
