@@ -6,7 +6,8 @@ improve (``abs diagnose``).
    hold the misfit.
 3. **Rank** (:mod:`.score`): every registered effect that the scene leaves out, by a score test
    at its null value (one Jacobian each), or a short fit where the derivative at null vanishes.
-4. **Select** (:mod:`.select`): fit the strongest candidates (predicted BIC gain > 0) fully,
+4. **Select** (:mod:`.select`): fit the strongest candidates (predicted BIC gain > 0) fully
+   (the best few of the score test and the best of the short fit, whose statistics differ in scale),
    with the current model refitted alongside as the control; accept the best one that improves
    the holdout views beyond noise and that BIC prefers. Repeat for another effect on top.
 5. **Guard**: with two effects accepted, refit without the earlier one; if the later one now does
@@ -118,7 +119,9 @@ def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, cap
                 **comparison.to_json(),
                 "train_rmse_after": trial.rmse("train"),
                 "stderr": {p: [None if not np.isfinite(s) else float(s) for s in stderr[p]]
-                           for p in c.parameters}}
+                           for p in c.parameters if p in stderr}}
+    if trial.held:
+        evidence["held_from_short_fit"] = sorted(trial.held)
     truth = _truth(capture, c.parameters)
     if truth:
         evidence["truth"] = truth
@@ -128,9 +131,26 @@ def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, cap
 
 def _clear_winner(first: tuple, runner_up: CandidateScore) -> bool:
     """The first trial passed with a BIC gain more than twice the runner-up's predicted one: the
-    runner-up cannot win, so it is not fitted (the score test predicts the gain well)."""
+    runner-up cannot win, so it is not fitted (the score test predicts the gain well; the short
+    fit's conservative statistic does not, so its candidate is always fitted)."""
     _, _, comparison = first
-    return comparison.accepted and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain
+    return runner_up.method == "score test" and comparison.accepted and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain
+
+
+def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
+    """The candidates fitted fully in a round, strongest predicted BIC gain first: the ``top_k``
+    strongest of the score test and the strongest of the short fit, each only with a positive
+    predicted gain.
+
+    The two statistics are not on a common scale: the short fit's crossed errors (two renders
+    per amount) are far more conservative than the score test, so an effect with a vanishing
+    derivative at null (rough glass) would rank behind score-test candidates that partly mimic
+    it (absorption also darkens glass) and never be fitted. Its own slot lets the full fits and
+    the holdout decide between them."""
+    positive = [s for s in scores if s.predicted_bic_gain > 0]
+    chosen = [s for s in positive if s.method == "score test"][:top_k]
+    chosen += [s for s in positive if s.method != "score test"][:1]
+    return sorted(chosen, key=lambda s: -s.predicted_bic_gain)
 
 
 def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effects: int = 2,
@@ -149,8 +169,8 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
     max_effects : int
         Stop after this many accepted effects.
     top_k : int
-        Candidates fitted fully per round (those with a positive predicted BIC gain); a
-        runner-up is skipped when the first fit is accepted with a BIC gain more than twice the
+        Score-test candidates fitted fully per round (those with a positive predicted BIC gain),
+        plus the strongest short-fit candidate (see :func:`_eligible`); a runner-up is skipped when the first fit is accepted with a BIC gain more than twice the
         runner-up's predicted gain.
     only : list of str, optional
         Effect names to consider (default: every registered effect).
@@ -203,7 +223,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         scores.sort(key=lambda s: -s.predicted_bic_gain)
         round_ = Round(scores)
         rounds.append(round_)
-        eligible = [s for s in scores if s.predicted_bic_gain > 0][:top_k]
+        eligible = _eligible(scores, top_k)
         if not eligible:
             break
         step(f"round {r + 1}: control refit")
@@ -212,13 +232,13 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
         for i, s in enumerate(eligible):
             if i and _clear_winner(round_.trials[0], s):
-                break
+                continue
             c = s.candidate
             step(f"round {r + 1}: fitting {c.label}")
             trial = fit_model(scene, capture, current.candidates + (c,),
                               {**current.values, **s.start}, settings,
                               work / f"round{r + 1}_{c.effect}_{c.target}.toml")
-            round_.trials.append((s, trial, compare(round_.control, trial, scatter)))
+            round_.trials.append((s, trial, compare(round_.control, trial, scatter, capture, settings)))
         passed = [t for t in round_.trials if t[2].accepted]
         if not passed:
             break
@@ -236,7 +256,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             start = {n: v for n, v in current.values.items() if n not in f.candidate.parameters}
             reduced = fit_model(scene, capture, others, start, settings,
                                 work / f"without_{f.candidate.effect}_{f.candidate.target}.toml")
-            check = compare(reduced, current, scatter)
+            check = compare(reduced, current, scatter, capture, settings)
             f.evidence["still_needed"] = check.to_json()
             if not check.accepted:
                 notes.append(f"{f.candidate.label} dropped: once the other effects are fitted it "

@@ -145,7 +145,7 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
         e = effect(c.effect)
         if e.zero_null_derivative:
             scores[c] = _short_fit(scene, capture, c, replace(settings, downsample=1)
-                                   if full_resolution else settings)
+                                   if e.full_resolution or full_resolution else settings)
         else:
             factor = 1 if e.full_resolution or full_resolution else settings.downsample
             groups.setdefault(factor, []).append(c)
@@ -185,7 +185,9 @@ def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
 
     A scan rather than a gradient fit: at the null the slope vanishes, and these effects'
     gradients (a spread exit point, a rough interface) are noisy at the few samples a diagnosis
-    can afford, so a short gradient fit wanders; a handful of paired renders does not.
+    can afford, so a short gradient fit wanders; a handful of paired renders does not. The best
+    amount (refined between grid points by a parabola) is the effect's estimate: the full fit
+    holds it (:func:`abs.diagnosis.select.fit_model`).
     """
     names = candidate.parameters
     _, vector, null, problem = _training_problem(scene, capture, names, settings.downsample, settings)
@@ -202,13 +204,26 @@ def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
         return (ra * rb).reshape(-1, 3).sum(axis=1)
 
     e0 = crossed(null)
-    z, best_theta = 0.0, null
-    for scale in PROBE_SCALES:
+
+    def tried(scale: float) -> tuple[float, float, np.ndarray]:
+        """(z of the drop, mean crossed error, theta) at ``scale`` times the probe."""
         theta = np.clip(null + scale * (probe - null), vector.lower, vector.upper)
-        drop = e0 - crossed(theta)
-        zi = float(drop.mean() / max(drop.std(ddof=1) / np.sqrt(drop.size), 1e-300))
-        if zi > z:
-            z, best_theta = zi, theta
+        e = crossed(theta)
+        drop = e0 - e
+        return (float(drop.mean() / max(drop.std(ddof=1) / np.sqrt(drop.size), 1e-300)),
+                float(e.mean()), theta)
+
+    grid = [tried(scale) for scale in PROBE_SCALES]
+    j = int(np.argmax([g[0] for g in grid]))
+    if 0 < j < len(grid) - 1:
+        # The amount between grid points: the vertex of a parabola through the best point and its
+        # neighbours in log amount (the grid is geometric).
+        x = np.log(PROBE_SCALES[j - 1:j + 2])
+        a, b, _ = np.polyfit(x, [g[1] for g in grid[j - 1:j + 2]], 2)
+        if a > 0:
+            grid.append(tried(float(np.exp(np.clip(-b / (2 * a), x[0], x[2])))))
+    z, _, best_theta = max(grid, key=lambda g: g[0])
+    z = max(z, 0.0)
     m = problem.n_residuals
     # A paired z test of the drop in crossed error over pixels; z^2 is on the chi-square scale of
     # the score statistics (one scalar).

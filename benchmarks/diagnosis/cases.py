@@ -28,7 +28,9 @@ class Case:
     ``truth`` overrides TOML fields of the given scene (parameter name -> true value): the hidden
     effect rendered by abs's own model. ``photographs`` names an independent truth renderer of
     :data:`TRUTH_RENDERERS` and its settings: the hidden effect made by physics that abs's model
-    only approximates (as in real photographs).
+    only approximates (as in real photographs). ``upscale`` multiplies the suite's image width and
+    height for this case: an effect finer than the suite's pixels (a subsurface spread of
+    millimetres) needs photographs that resolve it, as real megapixel photographs do.
     """
 
     name: str
@@ -36,6 +38,7 @@ class Case:
     hidden: tuple[str, ...]            # effect names expected in the verdict, most important first
     truth: dict = field(default_factory=dict)
     photographs: tuple[str, dict] | None = None
+    upscale: int = 1
 
     def describe_truth(self) -> str:
         if self.photographs is None:
@@ -95,8 +98,8 @@ CASES = [
     Case("sphere-env_distance", "sphere", ("env_distance",), {"environment.inverse_distance": [1.0]}),
     Case("sphere-surface_roughness", "sphere", ("surface_roughness",), {"glass.roughness": [0.15]}),
     Case("cloth-subsurface", "cloth", ("subsurface",),
-         photographs=("scattering_cloth", {"mean_free_path": 0.002})),
-    Case("sphere-subsurface", "sphere", ("subsurface",), {"cloth.subsurface": [0.015]}),
+         photographs=("scattering_cloth", {"mean_free_path": 0.002}), upscale=2),
+    Case("sphere-subsurface", "sphere", ("subsurface",), {"cloth.subsurface": [0.015]}, upscale=2),
     Case("box-pose", "box", ("pose",), {"box.pose": [0.01, 0.0, -0.008, 0.0, 0.1, 0.0]}),
     Case("box-pose-4mm", "box", ("pose",), {"box.pose": [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]}),
     Case("box-camera_response", "box", ("camera_response",),

@@ -53,7 +53,8 @@ def run_case(case, root: Path, args) -> dict:
         def render(compiled, camera, spp, seed):
             return TRUTH_RENDERERS[kind](compiled, camera, spp, seed, **extra)
     simulate_capture(load_scene(truth_path), folder / "capture", n_cameras=args.views,
-                     width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
+                     width=args.width * case.upscale,
+                     height=args.height * case.upscale, spp=args.photo_spp, shot_noise=1e-4,
                      read_noise=0.003, seed=3, render=render)
     settings = FitSettings(spp=args.spp, downsample=args.downsample, max_iterations=args.iterations,
                            refinement_steps=args.refinement, eval_spp=args.eval_spp)
@@ -66,16 +67,28 @@ def run_case(case, root: Path, args) -> dict:
     base = out["baseline"]
     final_holdout = result.final.rmse("holdout")
     return {"case": case.name, "scene": case.scene, "hidden": list(case.hidden),
+            "image_size": [args.width * case.upscale, args.height * case.upscale],
             "verdict": out["verdict"], "first_correct": bool(case.hidden) and out["verdict"][:1] == [case.hidden[0]],
             "all_found": set(case.hidden) <= set(out["verdict"]),
             "exact": sorted(out["verdict"]) == sorted(case.hidden),
             "holdout_rmse_before": base["holdout_rmse"], "holdout_rmse_after": final_holdout,
+            # Per accepted effect, the holdout errors its acceptance compared (noise-free crossed
+            # errors for effects that change the sampling, see abs.diagnosis.select.compare).
+            "accepted_holdout": [[f["effect"], f["holdout_rmse_before"], f["holdout_rmse_after"]]
+                                 for f in out["findings"]],
             "truth": case.truth, "truth_renderer": case.describe_truth(), "recovered": recovered,
             "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
 
 
 def _fmt(v) -> str:
     return "[" + ", ".join(f"{x:.3g}" for x in np.ravel(v)) + "]"
+
+
+def _holdout(row: dict) -> str:
+    """Baseline -> final holdout RMSE, and each accepted effect's compared errors."""
+    text = f"{row['holdout_rmse_before']:.4g} -> {row['holdout_rmse_after']:.4g}"
+    steps = [f"{e}: {b:.4g} -> {a:.4g}" for e, b, a in row.get("accepted_holdout", [])]
+    return text + (f" ({'; '.join(steps)})" if steps else "")
 
 
 def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
@@ -87,7 +100,8 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
         "single_effect_first_verdict_accuracy": (sum(r["first_correct"] for r in single) / len(single)) if single else None,
         "two_effect_both_found": (sum(r["all_found"] for r in double) / len(double)) if double else None,
         "null_false_alarm_rate": (sum(bool(r["verdict"]) for r in null) / len(null)) if null else None,
-        "holdout_improves_when_accepting": all(r["holdout_rmse_after"] < r["holdout_rmse_before"] for r in accepted),
+        "holdout_improves_when_accepting": all(after < before for r in accepted
+                                               for _, before, after in r.get("accepted_holdout", [])),
         "wall_s_per_diagnosis_median": float(np.median([r["wall_s"] for r in rows])) if rows else None,
         "cases": len(rows),
     }
@@ -95,6 +109,7 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
              f"Settings: {json.dumps(config)}", "",
              "| case | hidden | verdict | holdout RMSE before -> after | recovered vs truth | wall s |",
              "|---|---|---|---|---|---|"]
+    config_size = [config.get("width"), config.get("height")]
     for r in rows:
         rec = "; ".join(f"{p}: {_fmt(r['recovered'][p])} vs {_fmt(t)}" if p in r["recovered"]
                         else f"{p}: not found (truth {_fmt(t)})" for p, t in r["truth"].items())
@@ -102,9 +117,11 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
             found = "; ".join(f"{p}: {_fmt(v)}" for p, v in r["recovered"].items()
                               if p not in r["truth"]) or "nothing fitted"
             rec = "; ".join(x for x in (rec, f"{found} vs photographs by {r['truth_renderer']}") if x)
-        lines.append(f"| {r['case']} | {', '.join(r['hidden']) or '(none)'} | "
-                     f"{', '.join(r['verdict']) or '(empty)'} | {r['holdout_rmse_before']:.4g} -> "
-                     f"{r['holdout_rmse_after']:.4g} | {rec or '-'} | {r['wall_s']:.0f} |")
+        size = r.get("image_size")
+        name = r["case"] if not size or size == config_size else f"{r['case']} ({size[0]}x{size[1]})"
+        lines.append(f"| {name} | {', '.join(r['hidden']) or '(none)'} | "
+                     f"{', '.join(r['verdict']) or '(empty)'} | {_holdout(r)} | {rec or '-'} | "
+                     f"{r['wall_s']:.0f} |")
     lines += ["", f"- first-verdict accuracy on single-effect cases: {summary['single_effect_first_verdict_accuracy']}",
               f"- two-effect cases with both effects found: {summary['two_effect_both_found']}",
               f"- false-alarm rate on null cases: {summary['null_false_alarm_rate']}",

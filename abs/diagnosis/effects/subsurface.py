@@ -14,6 +14,9 @@ class Subsurface(Effect):
     # The exit point spreads symmetrically around the entry point: images change to second order
     # in the spread, so the score test is blind to it.
     zero_null_derivative = True
+    # A spread of a few millimetres is a fraction of a pixel once a table-top capture is
+    # downsampled; it is scored and fitted on the cameras' own pixels.
+    full_resolution = True
 
     def targets(self, scene, compiled) -> list[str]:
         used = {o.material for o in scene.objects}
