@@ -175,3 +175,23 @@ def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_sc
         assert score.method == "short fit"
         statistics[label] = score.predicted_bic_gain
     assert statistics["rough"] > 0 > statistics["smooth"], statistics
+
+
+def test_a_short_fit_candidate_is_fitted_even_behind_stronger_score_test_candidates():
+    """The short fit's crossed-error statistic is more conservative than the score test's: its
+    best candidate gets a slot of its own, but only with a positive predicted BIC gain."""
+    from abs.diagnosis.diagnose import _eligible
+    from abs.diagnosis.effects import Candidate
+    from abs.diagnosis.score import CandidateScore
+
+    def score(name, statistic, method):
+        return CandidateScore(Candidate(name, "x", (f"x.{name}",)), statistic, 1, 1000, method)
+
+    ln_m = float(np.log(1000))
+    scores = [score("absorption", 60.0, "score test"), score("vignetting", 50.0, "score test"),
+              score("stray_light", 40.0, "score test"), score("surface_roughness", ln_m + 5, "short fit"),
+              score("subsurface", ln_m + 1, "short fit")]
+    chosen = [s.candidate.effect for s in _eligible(scores, top_k=2)]
+    assert chosen == ["absorption", "vignetting", "surface_roughness"]
+    weak = [scores[0], score("surface_roughness", ln_m - 1, "short fit")]
+    assert [s.candidate.effect for s in _eligible(weak, top_k=2)] == ["absorption"]
