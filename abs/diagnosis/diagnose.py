@@ -7,7 +7,8 @@ improve (``abs diagnose``).
 3. **Rank** (:mod:`.score`): every registered effect that the scene leaves out, by a score test
    at its null value (one Jacobian each), or a short fit where the derivative at null vanishes.
 4. **Select** (:mod:`.select`): fit the strongest candidates (predicted BIC gain > 0) fully
-   (the best few of the score test and the best of the short fit, whose statistics differ in scale),
+   (the best few of the score test and the best of the short fit: their statistics differ in
+   scale),
    with the current model refitted alongside as the control; accept the best one that improves
    the holdout views beyond noise and that BIC prefers. Repeat for another effect on top.
 5. **Guard**: with two effects accepted, refit without the earlier one; if the later one now does
@@ -134,7 +135,8 @@ def _clear_winner(first: tuple, runner_up: CandidateScore) -> bool:
     runner-up cannot win, so it is not fitted (the score test predicts the gain well; the short
     fit's conservative statistic does not, so its candidate is always fitted)."""
     _, _, comparison = first
-    return runner_up.method == "score test" and comparison.accepted and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain
+    return (runner_up.method == "score test" and comparison.accepted
+            and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain)
 
 
 def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
@@ -170,8 +172,9 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         Stop after this many accepted effects.
     top_k : int
         Score-test candidates fitted fully per round (those with a positive predicted BIC gain),
-        plus the strongest short-fit candidate (see :func:`_eligible`); a runner-up is skipped when the first fit is accepted with a BIC gain more than twice the
-        runner-up's predicted gain.
+        plus the strongest short-fit candidate (see :func:`_eligible`); a score-test runner-up
+        is skipped when the first fit is accepted with a BIC gain more than twice the runner-up's
+        predicted gain.
     only : list of str, optional
         Effect names to consider (default: every registered effect).
     work_dir : path, optional

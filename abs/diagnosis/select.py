@@ -10,6 +10,10 @@ A candidate is accepted over a reference model only if both hold:
 - **BIC** on the training views prefers it: ``M ln(RSS_ext / RSS_ref) + k ln M < 0``, ``k`` the
   added scalars and ``M`` the compared residuals.
 
+Effects that change how the renderer samples light (a rough interface, a spread exit point)
+break the pairing of the holdout test; their comparisons use crossed errors of independent renders
+(:func:`compare`), and their amounts are held at the short fit's value (:func:`fit_model`).
+
 The control fit doubles as the reference: the extended model and the control start from the same
 values and run the same optimiser, so a better-converged fit of the old parameters cannot pass
 for a discovery.
@@ -140,7 +144,8 @@ def _holdout_errors(reference: ModelFit, extended: ModelFit, crossed: tuple | No
                 e1.append(np.sum(np.square(after[v.name] - v.photograph), axis=-1)[v.mask])
     else:
         capture, spp, seed = crossed
-        renders = {key: (_holdout_renders(m, capture, spp, seed), _holdout_renders(m, capture, spp, seed + 1))
+        renders = {key: (_holdout_renders(m, capture, spp, seed),
+                         _holdout_renders(m, capture, spp, seed + 1))
                    for key, m in (("ref", reference), ("ext", extended))}
         for v in reference.result.views:
             if v.holdout:
@@ -165,9 +170,10 @@ def compare(reference: ModelFit, extended: ModelFit, refit_scatter: float, captu
     so their Monte-Carlo noise largely cancels in the per-pixel difference. An effect that
     changes the sampling itself (:func:`_changes_sampling`) breaks that pairing, and a plain
     squared error would then reward whichever model renders with less noise (measured: rough
-    glass fitted at 0.11 for a true 0.15 was rejected on a holdout error made worse by its
-    noise, while BIC on the noise-free scan preferred it strongly). Such comparisons use crossed
-    errors of two independent renders per model, which estimate the noise-free misfit.
+    glass at 0.11 for a true 0.15 raised the plain holdout RMSE from 0.0527 to 0.0538, z = -1.5,
+    while its noise-free holdout error fell from 0.0233 to 0.0192, z = 5.7). Such comparisons
+    use crossed errors of two independent renders per model, which estimate the noise-free
+    misfit.
 
     Parameters
     ----------
