@@ -60,7 +60,8 @@ def run(args) -> int:
         print(f"  candidate {s.candidate.label}: score {s.statistic:.1f} ({s.method}, {s.dof} dof), "
               f"predicted BIC gain {s.predicted_bic_gain:.1f}")
     for f in result.findings:
-        print(f"found {f.candidate.effect}: holdout RMSE {f.comparison.holdout_rmse_before:.4g} -> "
+        print(f"found {f.candidate.effect}: {f.comparison.holdout_measure} "
+              f"{f.comparison.holdout_rmse_before:.4g} -> "
               f"{f.comparison.holdout_rmse_after:.4g}. {f.explanation}")
     print(f"verdict: {', '.join(result.verdict) or 'nothing missing'}")
     print(f"wrote {path}")

@@ -110,12 +110,16 @@ class Comparison:
     added_scalars: int
     accepted: bool
     reason: str
+    #: What the holdout RMSEs measure: ``holdout RMSE`` (renders sharing seeds) or ``noise-free
+    #: (crossed) holdout RMSE`` (effects that change the sampling, see :func:`compare`).
+    holdout_measure: str = "holdout RMSE"
 
     def to_json(self) -> dict:
         return {"holdout_rmse_before": self.holdout_rmse_before,
                 "holdout_rmse_after": self.holdout_rmse_after, "holdout_z": round(self.holdout_z, 3),
                 "refit_scatter": self.refit_scatter, "delta_bic": round(self.delta_bic, 3),
-                "added_scalars": self.added_scalars, "accepted": self.accepted, "reason": self.reason}
+                "added_scalars": self.added_scalars, "accepted": self.accepted, "reason": self.reason,
+                "holdout_measure": self.holdout_measure}
 
 
 def _holdout_renders(model: ModelFit, capture, spp: int, seed: int) -> dict[str, np.ndarray]:
@@ -216,4 +220,4 @@ def compare(reference: ModelFit, extended: ModelFit, refit_scatter: float, captu
             failed.append(f"BIC does not prefer it (delta {delta_bic:+.1f})")
         reason = "; ".join(failed)
     return Comparison(h0, h1, float(z), float(refit_scatter), float(delta_bic), int(k),
-                      bool(holdout_ok and bic_ok), reason)
+                      bool(holdout_ok and bic_ok), reason, measure)
