@@ -67,23 +67,25 @@ def make_sphere_and_floor(root: Path) -> None:
     write_mesh(root / "floor.ply", floor)
 
 
-@pytest.fixture(scope="session")
-def small_scene_dir(tmp_path_factory) -> Path:
-    """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""
+def make_backdrop(root: Path) -> None:
+    """``backdrop.obj``: a 60 x 30 cm board with texture coordinates, 12 cm behind the origin."""
     import trimesh
 
-    root = tmp_path_factory.mktemp("small_scene")
-    make_sphere_and_floor(root)
     back = trimesh.Trimesh(vertices=[[-0.3, 0, -0.12], [0.3, 0, -0.12], [0.3, 0.3, -0.12], [-0.3, 0.3, -0.12]],
                            faces=[[0, 1, 2], [0, 2, 3]], process=False)
     back.visual = trimesh.visual.TextureVisuals(uv=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float))
     write_mesh(root / "backdrop.obj", back)
-    make_env(root / "env.exr")
-    make_checker(root / "checker.png")
-    (root / "scene.toml").write_text("""
+
+
+def sphere_scene_toml(fit: list[str], absorption: list[float] | None = None, max_depth: int = 8) -> str:
+    """The scene file of the glass sphere (``sphere.ply``) on a cloth (``floor.ply``) in front of a
+    checkerboard (``backdrop.obj``, ``checker.png``) under ``env.exr``; ``absorption`` (1/m RGB)
+    is written only when given, ``fit`` lists the ``[fit]`` parameters."""
+    glass = "" if absorption is None else f"absorption = {list(map(float, absorption))}\n"
+    return f"""
 [render]
 spp = 16
-max_depth = 8
+max_depth = {max_depth}
 
 [environment]
 file = "env.exr"
@@ -92,8 +94,7 @@ scale = 1.0
 [materials.glass]
 type = "dielectric"
 ior = [1.5, 1.5, 1.5]
-absorption = [2.0, 4.0, 8.0]
-
+{glass}
 [materials.cloth]
 type = "diffuse"
 reflectance = [0.7, 0.7, 0.65]
@@ -118,8 +119,19 @@ mesh = "backdrop.obj"
 material = "backdrop"
 
 [fit]
-parameters = ["glass.absorption"]
-""")
+parameters = {fit!r}
+""".replace("'", '"')
+
+
+@pytest.fixture(scope="session")
+def small_scene_dir(tmp_path_factory) -> Path:
+    """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""
+    root = tmp_path_factory.mktemp("small_scene")
+    make_sphere_and_floor(root)
+    make_backdrop(root)
+    make_env(root / "env.exr")
+    make_checker(root / "checker.png")
+    (root / "scene.toml").write_text(sphere_scene_toml(["glass.absorption"], absorption=[2.0, 4.0, 8.0]))
     return root
 
 

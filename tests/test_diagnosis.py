@@ -42,44 +42,6 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     np.testing.assert_array_equal(image, reference)
 
 
-_SCENE = """
-[render]
-spp = 16
-max_depth = 6
-
-[environment]
-file = "env.exr"
-
-[materials.glass]
-type = "dielectric"
-ior = [1.5, 1.5, 1.5]
-
-[materials.cloth]
-type = "diffuse"
-reflectance = [0.7, 0.7, 0.65]
-
-[materials.backdrop]
-type = "diffuse"
-reflectance = "checker.png"
-
-[[objects]]
-name = "sphere"
-mesh = "sphere.ply"
-material = "glass"
-
-[[objects]]
-name = "floor"
-mesh = "floor.ply"
-material = "cloth"
-
-[[objects]]
-name = "board"
-mesh = "backdrop.obj"
-material = "backdrop"
-
-[fit]
-parameters = ["environment.scale"]
-"""
 
 _EFFECTS = "absorption,stray_light,vignetting"
 
@@ -88,13 +50,13 @@ _EFFECTS = "absorption,stray_light,vignetting"
 def diagnosis_scene(small_scene_dir, tmp_path_factory):
     """The small scene's glass sphere, floor and board, in a bright room (little caustic noise),
     with clear glass; fitted: the environment's scale."""
-    from conftest import make_soft_env
+    from conftest import make_soft_env, sphere_scene_toml
 
     root = tmp_path_factory.mktemp("diagnosis_scene")
     for name in ("sphere.ply", "floor.ply", "backdrop.obj", "checker.png"):
         (root / name).write_bytes((small_scene_dir / name).read_bytes())
     make_soft_env(root / "env.exr")
-    (root / "scene.toml").write_text(_SCENE)
+    (root / "scene.toml").write_text(sphere_scene_toml(["environment.scale"], max_depth=6))
     return root / "scene.toml"
 
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 __all__ = ["Case", "CASES", "QUICK", "build_scene"]
 
@@ -116,43 +115,6 @@ QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
          "box-pose", "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
 
-_SPHERE = """
-[render]
-spp = 16
-max_depth = 8
-
-[environment]
-file = "env.exr"
-scale = 1.0
-
-[materials.glass]
-type = "dielectric"
-ior = [1.5, 1.5, 1.5]
-absorption = [0.0, 0.0, 0.0]
-
-[materials.cloth]
-type = "diffuse"
-reflectance = [0.7, 0.7, 0.65]
-
-[materials.backdrop]
-type = "diffuse"
-reflectance = "checker.png"
-
-[[objects]]
-name = "sphere"
-mesh = "sphere.ply"
-material = "glass"
-
-[[objects]]
-name = "floor"
-mesh = "floor.ply"
-material = "cloth"
-
-[[objects]]
-name = "board"
-mesh = "backdrop.obj"
-material = "backdrop"
-"""
 
 _BOX = """
 [materials.paint]
@@ -166,21 +128,25 @@ material = "paint"
 """
 
 
-def _assets(root: Path) -> None:
+def _conftest() -> None:
+    """The test suite's scene builders (``tests/conftest.py``) are the suite's too."""
     import sys
 
+    tests = str(Path(__file__).resolve().parents[2] / "tests")
+    if tests not in sys.path:
+        sys.path.insert(0, tests)
+
+
+def _assets(root: Path) -> None:
     import trimesh
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
-    from conftest import make_checker, make_soft_env, make_sphere_and_floor, write_mesh
+    _conftest()
+    from conftest import make_backdrop, make_checker, make_soft_env, make_sphere_and_floor, write_mesh
 
     make_soft_env(root / "env.exr")
     make_checker(root / "checker.png")
     make_sphere_and_floor(root)
-    back = trimesh.Trimesh(vertices=[[-0.3, 0, -0.12], [0.3, 0, -0.12], [0.3, 0.3, -0.12], [-0.3, 0.3, -0.12]],
-                           faces=[[0, 1, 2], [0, 2, 3]], process=False)
-    back.visual = trimesh.visual.TextureVisuals(uv=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float))
-    write_mesh(root / "backdrop.obj", back)
+    make_backdrop(root)
     box = trimesh.creation.box(extents=[0.06, 0.05, 0.05])
     box.apply_translation([-0.07, 0.025, 0.0])
     write_mesh(root / "box.ply", box)
@@ -191,9 +157,12 @@ def build_scene(root: Path, kind: str) -> Path:
     root.mkdir(parents=True, exist_ok=True)
     if not (root / "env.exr").exists():
         _assets(root)
-    text = _SPHERE + {"box": _BOX + '\n[fit]\nparameters = ["environment.scale", "paint.reflectance"]\n',
-                      "sphere": '\n[fit]\nparameters = ["environment.scale"]\n',
-                      "cloth": '\n[fit]\nparameters = ["environment.scale", "cloth.reflectance"]\n'}[kind]
+    _conftest()
+    from conftest import sphere_scene_toml
+
+    fit = {"box": ["environment.scale", "paint.reflectance"], "sphere": ["environment.scale"],
+           "cloth": ["environment.scale", "cloth.reflectance"]}[kind]
+    text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (_BOX if kind == "box" else "")
     path = root / f"{kind}.toml"
     path.write_text(text)
     return path

@@ -1,0 +1,59 @@
+"""The diagnosis proof suite's cases are well formed: every hidden effect is in the catalogue, every
+truth override lands in the truth scene, and every truth renderer accepts its settings.
+
+The suite itself takes about half an hour (``benchmarks/diagnosis/run.py``); a case that names an
+effect the catalogue lost, or a truth value no candidate carries, would otherwise only show there
+(as a silently effect-free "photograph" and a wrong verdict).
+"""
+
+from __future__ import annotations
+
+import inspect
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "diagnosis"))
+
+from cases import CASES, QUICK, TRUTH_RENDERERS, build_scene  # noqa: E402
+from run import _truth_scene  # noqa: E402
+
+from abs.diagnosis.effects import effects  # noqa: E402
+from abs.params.names import parameter_specs  # noqa: E402
+from abs.scene import load_scene  # noqa: E402
+
+
+def test_case_names_are_unique_and_quick_is_a_subset():
+    names = [c.name for c in CASES]
+    assert len(names) == len(set(names))
+    assert set(QUICK) <= set(names)
+    # The quick suite names every effect of the catalogue at least once, and has null cases.
+    hidden = {e for c in CASES if c.name in QUICK for e in c.hidden}
+    assert hidden == set(effects())
+    assert any(not c.hidden for c in CASES if c.name in QUICK)
+
+
+@pytest.mark.parametrize("case", [c for c in CASES if c.photographs is not None], ids=lambda c: c.name)
+def test_truth_renderers_accept_their_settings(case):
+    kind, settings = case.photographs
+    signature = inspect.signature(TRUTH_RENDERERS[kind])
+    signature.bind(None, None, 1, 0, **settings)  # raises TypeError on a misspelt setting
+
+
+def test_every_truth_override_lands_in_the_truth_scene(tmp_path):
+    """The truth scene carries each override at its value; the given scene has none of them."""
+    registry = effects()
+    for case in CASES:
+        assert set(case.hidden) <= set(registry), case.name
+        if not case.truth:
+            continue
+        scene_path = build_scene(tmp_path / case.scene, case.scene)
+        truth = parameter_specs(load_scene(_truth_scene(scene_path, case, tmp_path / case.name / "truth.toml")))
+        given = parameter_specs(load_scene(scene_path))
+        for name, value in case.truth.items():
+            assert name in truth, (case.name, name)
+            np.testing.assert_allclose(truth[name].initial, value, err_msg=f"{case.name}: {name}")
+            before = given[name].initial if name in given else None
+            assert before is None or not np.allclose(before, value), (case.name, name)
