@@ -10,14 +10,19 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+import numpy as np
 import tomli_w
 
 from abs.diagnosis.effects import Candidate, effect
+from abs.fitting.fit import prepare
+from abs.fitting.observations import observe
+from abs.fitting.parameters import ParameterVector
+from abs.fitting.problem import FitProblem
 from abs.scene.load import load_scene
 from abs.scene.scene import Scene
 from abs.scene.write import scene_table, write_scene
 
-__all__ = ["extend_scene"]
+__all__ = ["extend_scene", "render_problem"]
 
 
 def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[str, object],
@@ -56,3 +61,18 @@ def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[
         write_scene(extended, path, values)
         extended = load_scene(path)
     return extended
+
+
+def render_problem(scene: Scene, capture, names: Sequence[str], holdout: bool, factor: int,
+                   clamp: float | None, values: Mapping[str, object] | None = None):
+    """``(compiled, vector, theta, problem)``: ``scene`` compiled with ``names`` as its parameters,
+    their values ``theta`` (``values``, or exactly the scene's own: null values stay unclipped) and
+    a :class:`~abs.fitting.problem.FitProblem` over the training (or holdout) views downsampled by
+    ``factor``, with the fits' ``clamp``."""
+    _, compiled, capture, names = prepare(scene, capture, tuple(names))
+    current = {n: np.asarray(values[n] if values is not None else compiled.get(n), float).ravel()
+               for n in names}
+    vector = ParameterVector.build(compiled.specs, names, current)
+    views = capture.holdout_views if holdout else capture.train_views
+    problem = FitProblem(compiled, vector, [observe(v, factor) for v in views], clamp)
+    return compiled, vector, np.concatenate([current[n] for n in names]), problem

@@ -29,10 +29,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.fitting.fit import prepare
-from abs.fitting.observations import observe
+from abs.diagnosis.model import render_problem
 from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem
 from abs.fitting.settings import FitSettings
 
 __all__ = ["CandidateScore", "score_candidates"]
@@ -107,18 +105,6 @@ def _inside(vector: ParameterVector, theta: np.ndarray, candidate: slice) -> np.
     return theta
 
 
-def _training_problem(scene, capture, names, factor: int, settings: FitSettings):
-    """``(compiled, vector, theta0, problem)``: ``scene`` compiled with ``names`` as its parameters,
-    their current values ``theta0`` (exactly the null values, not clipped) and the training views
-    downsampled by ``factor``."""
-    _, compiled, capture, names = prepare(scene, capture, names)
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    theta0 = np.concatenate([compiled.get(n) for n in names])
-    problem = FitProblem(compiled, vector, [observe(v, factor) for v in capture.train_views],
-                         settings.clamp)
-    return compiled, vector, theta0, problem
-
-
 def score_candidates(scene, capture, base_parameters, candidates: list[Candidate],
                      settings: FitSettings, full_resolution: bool = False) -> list[CandidateScore]:
     """Score candidates against the current model, sharing one Jacobian among them.
@@ -151,7 +137,7 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
             groups.setdefault(factor, []).append(c)
     for factor, group in groups.items():
         names = tuple(base_parameters) + tuple(p for c in group for p in c.parameters)
-        compiled, vector, theta0, problem = _training_problem(scene, capture, names, factor, settings)
+        compiled, vector, theta0, problem = render_problem(scene, capture, names, False, factor, settings.clamp)
         r, J = problem.residuals(theta0, SCORE_SPP_FACTOR * settings.spp, settings.seed + 501,
                                  jacobian=True,
                                  jacobian_seed=settings.seed + 502)
@@ -190,7 +176,8 @@ def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
     holds it (:func:`abs.diagnosis.select.fit_model`).
     """
     names = candidate.parameters
-    _, vector, null, problem = _training_problem(scene, capture, names, settings.downsample, settings)
+    _, vector, null, problem = render_problem(scene, capture, names, False, settings.downsample,
+                                              settings.clamp)
     probe = effect(candidate.effect).probe(candidate.target)
     probe = np.concatenate([np.asarray(probe[n], float).ravel() for n in names])
     spp = SHORT_FIT_SPP_FACTOR * settings.spp

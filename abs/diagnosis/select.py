@@ -27,12 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.diagnosis.model import extend_scene
+from abs.diagnosis.model import extend_scene, render_problem
 from abs.fitting import FitResult, FitSettings, fit
-from abs.fitting.fit import prepare
-from abs.fitting.observations import observe
-from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem
+from abs.fitting.fit import render_views
 
 __all__ = ["ModelFit", "Comparison", "fit_model", "compare", "HOLDOUT_Z"]
 
@@ -123,13 +120,11 @@ class Comparison:
 
 
 def _holdout_renders(model: ModelFit, capture, spp: int, seed: int) -> dict[str, np.ndarray]:
-    """The holdout views rendered at the model's fitted values."""
-    _, compiled, capture, names = prepare(model.scene, capture, tuple(model.result.values))
-    vector = ParameterVector.build(compiled.specs, names, model.result.values)
-    problem = FitProblem(compiled, vector, [observe(v) for v in capture.holdout_views])
-    theta = np.concatenate([np.asarray(model.result.values[n], float).ravel() for n in names])
-    return {o.name: problem.render(o, theta, spp, seed + 7 * i)
-            for i, o in enumerate(problem.observations)}
+    """The holdout views rendered at the model's fitted values, as a fit renders them for its
+    metrics (unclamped)."""
+    _, _, theta, problem = render_problem(model.scene, capture, tuple(model.result.values), True, 1,
+                                          None, model.result.values)
+    return render_views(problem, problem.observations, theta, spp, seed)
 
 
 def _holdout_errors(reference: ModelFit, extended: ModelFit, crossed: tuple | None
@@ -213,9 +208,9 @@ def compare(reference: ModelFit, extended: ModelFit, refit_scatter: float, captu
     else:
         failed = []
         if not holdout_ok:
+            margin = "" if crossed is not None else f" and a drop > refit scatter {refit_scatter:.2g}"
             failed.append(f"{measure} {h0:.4g} -> {h1:.4g} is not an improvement beyond noise "
-                          f"(z = {z:.1f}, needs > {HOLDOUT_Z:g} and a drop > refit scatter "
-                          f"{refit_scatter:.2g})")
+                          f"(z = {z:.1f}, needs > {HOLDOUT_Z:g}{margin})")
         if not bic_ok:
             failed.append(f"BIC does not prefer it (delta {delta_bic:+.1f})")
         reason = "; ".join(failed)

@@ -26,7 +26,7 @@ from abs.fitting.problem import FitProblem, RenderCounter
 from abs.fitting.settings import LM_MAX_SCALARS, FitSettings, schedule_value
 from abs.metrics import ssim
 
-__all__ = ["fit", "FitResult", "ViewRenderings", "prepare"]
+__all__ = ["fit", "FitResult", "ViewRenderings", "prepare", "render_views"]
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,10 @@ def prepare(scene, capture, parameters=None):
     return scene, compiled, capture, names
 
 
-def _evaluate(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
-              seed: int) -> dict[str, np.ndarray]:
+def render_views(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
+                 seed: int) -> dict[str, np.ndarray]:
+    """Renderings of ``observations`` at ``theta`` by name, view ``i`` seeded ``seed + 7 i``: a fit's
+    before/after images (and the diagnosis's holdout renders) are made this one way."""
     return {o.name: problem.render(o, theta, spp, seed + 7 * i) for i, o in enumerate(observations)}
 
 
@@ -183,7 +185,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
 
     full = problem_at(1, capture.views)
     eval_spp = settings.eval_spp or scene.render.spp
-    before = _evaluate(full, full.observations, vector.initial, eval_spp, settings.seed + 1)
+    before = render_views(full, full.observations, vector.initial, eval_spp, settings.seed + 1)
 
     prior_mean = np.full(vector.size, np.nan)
     prior_sd = np.full(vector.size, np.inf)
@@ -269,7 +271,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                      on_iteration=iteration_done)
 
     theta = vector.to_physical(state.z)
-    after = _evaluate(full, full.observations, theta, eval_spp, settings.seed + 1)
+    after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
     problem = train_problem(settings.downsample)
     r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True,
