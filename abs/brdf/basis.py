@@ -360,6 +360,8 @@ class BRDFBasis:
         """Dr.Jit copies of the arrays for the active variant, built once."""
         import mitsuba as mi
 
+        from abs.render.jit import from_numpy
+
         variant = mi.variant()
         cached = self._device.get(variant)
         if cached is None:
@@ -367,10 +369,10 @@ class BRDFBasis:
             w = self.cosine_weight.astype(np.float64)
             # Precompute the unmap's affine terms: f = offset·exp(x)·inv_w − eps·inv_w.
             cached = {
-                "mean": mi.Float(self.mean),
-                "components": [mi.Float(row) for row in self.components],
-                "scale": mi.Float(((self.median * w + eps) / w).astype(np.float32)),
-                "shift": mi.Float((eps / w).astype(np.float32)),
+                "mean": from_numpy(mi.Float, self.mean),
+                "components": [from_numpy(mi.Float, row) for row in self.components],
+                "scale": from_numpy(mi.Float, (self.median * w + eps) / w),
+                "shift": from_numpy(mi.Float, eps / w),
             }
             self._device[variant] = cached
         return cached

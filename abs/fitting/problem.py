@@ -26,6 +26,7 @@ import numpy as np
 from abs.fitting.observations import Observation
 from abs.fitting.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
+from abs.render.jit import from_numpy
 
 __all__ = ["FitProblem", "AD_SAMPLES_PER_BATCH"]
 
@@ -90,7 +91,7 @@ class FitProblem:
 
     def _attach(self, theta: np.ndarray) -> mi.Float:
         """Write ``theta`` as one attached Dr.Jit array; returns it."""
-        attached = mi.Float(np.asarray(theta, np.float32))
+        attached = from_numpy(mi.Float, theta)
         dr.enable_grad(attached)
         for name, s in self.vector.slices().items():
             index = dr.arange(mi.UInt32, s.stop - s.start) + s.start
@@ -186,7 +187,7 @@ class FitProblem:
                     image += rendered.numpy() * (n / spp)
                 tangent = np.zeros(p, np.float32)
                 tangent[i] = 1.0
-                dr.set_grad(attached, mi.Float(tangent))
+                dr.set_grad(attached, from_numpy(mi.Float, tangent))
                 dr.forward_to(rendered)
                 jac[..., i] += dr.grad(rendered).numpy() * (n / spp)
                 del rendered, attached
@@ -210,7 +211,7 @@ class FitProblem:
             total += 0.5 * float(r @ r)
             clamped, live = self._clamp(image)
             residual = (clamped - obs.photograph) * (obs.mask[..., None] & live)
-            weight = mi.Float(residual.astype(np.float32).ravel())
+            weight = from_numpy(mi.Float, residual)
             for b, n in enumerate(self._batches(cam, spp)):
                 attached = self._attach(theta)
                 rendered = self.compiled.render(cam, spp=n, seed=_view_seed(jacobian_seed, k) + b,

@@ -25,7 +25,7 @@ from abs.render.camera import Camera
 from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
-from abs.render.jit import opaque
+from abs.render.jit import from_numpy, opaque
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
@@ -82,7 +82,7 @@ class CompiledScene:
                 self.values[name] = opaque(mi.Float, np.asarray(p.initial, np.float32))
         for obj in scene.objects:
             if np.any(obj.pose != 0):
-                self.set(f"{obj.name}.pose", mi.Float(obj.pose.astype(np.float32)))
+                self.set(f"{obj.name}.pose", from_numpy(mi.Float, obj.pose))
         for name, material in scene.materials.items():
             for field, mspec in material.parameters().items():
                 if mspec.mitsuba_key is None:  # e.g. brdf_pca: table computed from coefficients
@@ -170,12 +170,12 @@ class CompiledScene:
         r = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])
         rot = rotation_matrix(r)
         c = mi.Vector3f(*[float(x) for x in centre])
-        p = mi.Vector3f(*[mi.Float(pos[:, i].astype(np.float32)) for i in range(3)])
+        p = mi.Vector3f(*[from_numpy(mi.Float, pos[:, i]) for i in range(3)])
         positions = dr.ravel(rot @ (p - c) + c + t)
         self._posed[obj] = positions
         self.params[f"{obj}.vertex_positions"] = positions
         if normals is not None:
-            nrm = mi.Vector3f(*[mi.Float(normals[:, i].astype(np.float32)) for i in range(3)])
+            nrm = mi.Vector3f(*[from_numpy(mi.Float, normals[:, i]) for i in range(3)])
             self.params[f"{obj}.vertex_normals"] = dr.ravel(rot @ nrm)
 
     def _spec(self, name: str) -> Parameter:

@@ -27,6 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.camera.pinhole import project
+from abs.render.jit import from_numpy, opaque
 
 __all__ = ["MovingMesh", "edge_adjacency", "silhouette_edges", "boundary_term"]
 
@@ -118,14 +119,14 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
     positions = dr.concat([m.positions for m in meshes]) if len(meshes) > 1 else meshes[0].positions
 
     def vertex(index: np.ndarray) -> mi.Vector3f:
-        i = mi.UInt32(index.astype(np.uint32)) * 3
+        i = from_numpy(mi.UInt32, index, np.uint32) * 3
         return mi.Vector3f(*[dr.gather(mi.Float, positions, i + k) for k in range(3)])
 
     ua, va = camera.project(vertex(edges[pick, 0]))
     ub, vb = camera.project(vertex(edges[pick, 1]))
-    ss = mi.Float(s.astype(np.float32))
+    ss = from_numpy(mi.Float, s)
     px, py = ua + ss * (ub - ua), va + ss * (vb - va)
-    nx, ny = (mi.Float(normal[:, i].astype(np.float32)) for i in range(2))
+    nx, ny = (from_numpy(mi.Float, normal[:, i]) for i in range(2))
     velocity = (px - dr.detach(px)) * nx + (py - dr.detach(py)) * ny  # zero value, attached
 
     # Radiance just on either side of the edge (detached).
@@ -134,13 +135,14 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
         sampler.seed(seed, n_samples)
         radiance = []
         for sign in (1.0, -1.0):
-            u = mi.Float((x[:, 0] + sign * _PROBE_OFFSET_PX * normal[:, 0]).astype(np.float32))
-            v = mi.Float((x[:, 1] + sign * _PROBE_OFFSET_PX * normal[:, 1]).astype(np.float32))
+            u = from_numpy(mi.Float, x[:, 0] + sign * _PROBE_OFFSET_PX * normal[:, 0])
+            v = from_numpy(mi.Float, x[:, 1] + sign * _PROBE_OFFSET_PX * normal[:, 1])
             origin, d = camera.rays(u, v)
             ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
             radiance.append(tracer._trace(scene, env, ray, sampler))
         difference = radiance[1] - radiance[0]
-    contribution = difference * velocity * (total / n_samples)
+    # Opaque: the silhouette's length changes with the pose and must not become a kernel literal.
+    contribution = difference * velocity * opaque(mi.Float, total / n_samples)
 
     # Splat through the tent pixel filter (the same filter the renderer integrates with).
     fx, fy = np.floor(x[:, 0]), np.floor(x[:, 1])
@@ -149,9 +151,10 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
             cx, cy = fx + dx, fy + dy
             k = np.maximum(1 - np.abs(x[:, 0] - cx), 0) * np.maximum(1 - np.abs(x[:, 1] - cy), 0)
             inside = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (k > 0)
-            index = mi.UInt32(np.where(inside, (cy * w + cx) * 3, 0).astype(np.uint32))
-            weight = mi.Float(np.where(inside, k, 0).astype(np.float32))
+            index = from_numpy(mi.UInt32, np.where(inside, (cy * w + cx) * 3, 0), np.uint32)
+            weight = from_numpy(mi.Float, np.where(inside, k, 0))
+            inside_mask = from_numpy(mi.Bool, inside, np.bool_)
             for c, value in enumerate((contribution.x, contribution.y, contribution.z)):
-                dr.scatter_add(flat, value * weight, index + c, mi.Bool(inside))
+                dr.scatter_add(flat, value * weight, index + c, inside_mask)
     return mi.TensorXf(flat, (h, w, 3))
 

@@ -32,6 +32,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from abs.render.jit import from_numpy
+
 __all__ = ["Environment"]
 
 
@@ -63,7 +65,7 @@ class Environment:
                  rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0)):
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
-        self.data = mi.TensorXf(rgb)
+        self.data = mi.TensorXf(from_numpy(mi.Float, rgb), rgb.shape)
         # Opaque so that new values (every fit iteration) do not recompile kernels.
         self.scale = dr.opaque(mi.Float, scale)
         self.rotation = dr.opaque(mi.Float, rotation)
@@ -140,8 +142,8 @@ class Environment:
         # A floor keeps every direction sampleable, so MIS stays unbiased for dark pixels.
         weight = weight + 1e-3 * max(float(weight.mean()), 1e-12)
         self._pmf = weight / weight.sum()
-        self._distribution = mi.DiscreteDistribution(mi.Float(self._pmf.ravel().astype(np.float32)))
-        self._pmf_flat = mi.Float(self._pmf.ravel().astype(np.float32))
+        self._distribution = mi.DiscreteDistribution(from_numpy(mi.Float, self._pmf))
+        self._pmf_flat = from_numpy(mi.Float, self._pmf)
 
     def sample(self, sample: mi.Point2f, active=True):
         """Sample a world direction towards the environment.

@@ -25,7 +25,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.render.camera import Camera
-from abs.render.jit import opaque
+from abs.render.jit import from_numpy, opaque
 
 __all__ = ["Sensor", "radial_moments"]
 
@@ -88,8 +88,8 @@ class Sensor:
         flat = image.array
         r2, r4 = radial_moments(camera)
         # One entry per (pixel, channel) lane, in the image's (H, W, 3) memory order.
-        r2 = mi.Float(np.repeat(r2.ravel(), 3).astype(np.float32))
-        r4 = mi.Float(np.repeat(r4.ravel(), 3).astype(np.float32))
+        r2 = from_numpy(mi.Float, np.repeat(r2.ravel(), 3))
+        r4 = from_numpy(mi.Float, np.repeat(r4.ravel(), 3))
         channel = dr.arange(mi.UInt32, h * w * 3) % 3
         k1 = dr.gather(mi.Float, self.vignetting, mi.UInt32(0))
         k2 = dr.gather(mi.Float, self.vignetting, mi.UInt32(1))

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import mitsuba as mi
 import numpy as np
 
+from abs.render.jit import from_numpy
 from abs.studies.sl_capture import SURFACE_OFFSET_M, sample_scene
 from abs.studies.sl_noise import ScanEstimate, tangent_frame
 from abs.studies.sl_rig import ScannerRig
@@ -97,9 +98,9 @@ def _unoccluded(scene: mi.Scene, origins: np.ndarray, targets: np.ndarray) -> np
     delta = targets - origins
     dist = np.linalg.norm(delta, axis=1)
     d = delta / dist[:, None]
-    o = mi.Point3f(*[mi.Float(origins[:, i].astype(np.float32)) for i in range(3)])
-    ray = mi.Ray3f(o, mi.Vector3f(*[mi.Float(d[:, i].astype(np.float32)) for i in range(3)]),
-                   mi.Float((dist * (1.0 - 1e-4)).astype(np.float32)), 0.0, mi.Color0f())
+    o = mi.Point3f(*[from_numpy(mi.Float, origins[:, i]) for i in range(3)])
+    ray = mi.Ray3f(o, mi.Vector3f(*[from_numpy(mi.Float, d[:, i]) for i in range(3)]),
+                   from_numpy(mi.Float, dist * (1.0 - 1e-4)), 0.0, mi.Color0f())
     return ~np.asarray(scene.ray_test(ray), bool)
 
 

@@ -23,6 +23,7 @@ from abs.render.bsdfs import tabulated as _tabulated  # noqa: F401  (registers a
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
+from abs.render.jit import from_numpy
 
 __all__ = ["DEFAULT_ENVIRONMENT", "ScoreSettings", "Scorer", "ciede2000_image", "reinhard"]
 
@@ -126,7 +127,7 @@ class Scorer:
 
     def render(self, table: np.ndarray) -> np.ndarray:
         """(size, size, 3) linear rendering of the sphere with ``table`` (1/sr, MERL layout)."""
-        self.params[self.key] = mi.Float(np.maximum(np.asarray(table, np.float32).ravel(), 0.0))
+        self.params[self.key] = from_numpy(mi.Float, np.maximum(np.asarray(table, np.float32), 0.0))
         self.params.update()
         # Two segments: a convex sphere alone sees only the environment (no inter-reflection).
         image = PathTracer(max_depth=2).render(self.scene, self.environment, self.camera,

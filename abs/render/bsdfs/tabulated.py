@@ -37,6 +37,7 @@ if "mitsuba" not in sys.modules or sys.modules["mitsuba"].variant() is None:
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
 from abs.io.merl import MERL_SHAPE, MERL_SIZE, read_merl  # noqa: E402
+from abs.render.jit import from_numpy  # noqa: E402
 
 __all__ = ["PLUGIN_NAME", "TABLE_KEY", "TabulatedBSDF", "register", "rusinkiewicz_angles"]
 
@@ -116,7 +117,7 @@ class TabulatedBSDF(mi.BSDF):
             # resolve() returns a mi.filesystem.path, which pathlib does not accept.
             path = Path(str(mi.file_resolver().resolve(filename)))
             self.filename: str | None = str(path)
-            self.table = mi.Float(read_merl(path).ravel())
+            self.table = from_numpy(mi.Float, read_merl(path))
         else:
             self.filename = None
             self.table = dr.zeros(mi.Float, MERL_SIZE)
