@@ -15,6 +15,17 @@ from abs.render import Camera, compile_scene
 from abs.scene import load_scene
 
 
+def _differences(a, b, path="") -> list[str]:
+    """Paths where two JSON documents differ (numbers beyond float32 round-off)."""
+    if isinstance(a, dict) and isinstance(b, dict) and a.keys() == b.keys():
+        return [d for k in a for d in _differences(a[k], b[k], f"{path}.{k}")]
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [d for i, (x, y) in enumerate(zip(a, b)) for d in _differences(x, y, f"{path}[{i}]")]
+    if isinstance(a, float) and isinstance(b, float):  # renders agree to float32 round-off
+        return [] if np.isclose(a, b, rtol=1e-5, atol=1e-9) else [f"{path}: {a!r} != {b!r}"]
+    return [] if a == b else [f"{path}: {a!r} != {b!r}"]
+
+
 def _camera(compiled, width=16, height=12) -> Camera:
     from abs.simulate import place_cameras
 
@@ -103,6 +114,18 @@ def test_cli_finds_concealed_stray_light_and_writes_the_contract(diagnosis_scene
     # Roughly: the offset trades off with the fitted environment scale.
     assert np.all(np.abs(recovered - truth) < 0.5 * np.array(truth)), recovered
     assert (out / "report" / "report.html").exists()
+
+    # Resumable: every model fit left a checkpoint; a resumed run continues the finished fits
+    # (no optimiser iteration, so no checkpoint is rewritten) and reaches the same diagnosis.
+    checkpoints = sorted((out / "models").glob("*.checkpoint/checkpoint.json"))
+    assert len(checkpoints) >= 3  # baseline, control, at least one trial
+    stamps = [c.stat().st_mtime_ns for c in checkpoints]
+    assert main(["diagnose", str(diagnosis_scene), str(capture), "--out", str(out), "--spp", "8",
+                 "--downsample", "1", "--max-iterations", "6", "--refinement-steps", "2",
+                 "--eval-spp", "32", "--effects", _EFFECTS, "--no-report", "--resume"]) == 0
+    assert [c.stat().st_mtime_ns for c in checkpoints] == stamps
+    again = json.loads((out / "diagnosis.json").read_text())
+    assert _differences(again, d) == [], _differences(again, d)
 
 
 @pytest.mark.slow

@@ -26,6 +26,8 @@ def add_parser(sub) -> None:
                    help="clamp renderings at this value (photographs that saturate, e.g. 1.0)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted diagnosis from the checkpoints in OUT/models")
     p.set_defaults(run=run)
 
 
@@ -49,7 +51,7 @@ def run(args) -> int:
         bar.update(1)
 
     result = diagnose(args.scene, args.capture, settings, max_effects=args.max_effects, only=only,
-                      work_dir=args.out / "models", on_step=on_step)
+                      work_dir=args.out / "models", on_step=on_step, resume=args.resume)
     bar.close()
     path = write_json(args.out / "diagnosis.json", result.to_json())
     if not args.no_report:

@@ -157,7 +157,7 @@ def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
 
 def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effects: int = 2,
              top_k: int = 2, only: list[str] | None = None, work_dir: str | Path | None = None,
-             on_step: Callable[[str], None] | None = None) -> Diagnosis:
+             on_step: Callable[[str], None] | None = None, resume: bool = False) -> Diagnosis:
     """Find what physics the scene file leaves out, from a capture.
 
     Parameters
@@ -181,6 +181,12 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         Where the extended scene files are written (default: a temporary folder).
     on_step : callable, optional
         Called with a short description before every expensive step (progress display).
+    resume : bool
+        Continue an interrupted diagnosis in the same ``work_dir``: every model fit is
+        checkpointed there after each iteration, and a fit that finished (or was interrupted)
+        before is continued from its checkpoint rather than started again
+        (:func:`~abs.diagnosis.select.fit_model`); scores are recomputed. Renders are seeded, so
+        a resumed diagnosis reaches the same verdict.
     """
     from abs.fitting.fit import prepare
     from abs.render import Camera
@@ -197,13 +203,15 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         if name not in known:
             raise InputError(None, "effects", f"unknown effect {name!r}; known: {', '.join(sorted(known))}")
     tmp = None
+    if work_dir is None and resume:
+        raise InputError(None, "work_dir", "resume needs the work_dir of the interrupted diagnosis")
     if work_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="abs-diagnose-")
         work_dir = tmp.name
     work = Path(work_dir)
 
     step("baseline fit")
-    baseline = fit_model(scene, capture, (), {}, settings, work / "baseline.toml")
+    baseline = fit_model(scene, capture, (), {}, settings, work / "baseline.toml", resume)
     step("locating the residual")
     cameras = {v.name: Camera.from_view(v) for v in capture.views}
     maps = residual_maps(compiled, baseline.result.views, cameras)
@@ -231,7 +239,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             break
         step(f"round {r + 1}: control refit")
         round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
-                                   work / f"round{r + 1}_control.toml")
+                                   work / f"round{r + 1}_control.toml", resume)
         scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
         for i, s in enumerate(eligible):
             if i and _clear_winner(round_.trials[0], s):
@@ -240,7 +248,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             step(f"round {r + 1}: fitting {c.label}")
             trial = fit_model(scene, capture, current.candidates + (c,),
                               {**current.values, **s.start}, settings,
-                              work / f"round{r + 1}_{c.effect}_{c.target}.toml")
+                              work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume)
             round_.trials.append((s, trial, compare(round_.control, trial, scatter, capture, settings)))
         passed = [t for t in round_.trials if t[2].accepted]
         if not passed:
@@ -258,7 +266,8 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             others = tuple(c for c in current.candidates if c != f.candidate)
             start = {n: v for n, v in current.values.items() if n not in f.candidate.parameters}
             reduced = fit_model(scene, capture, others, start, settings,
-                                work / f"without_{f.candidate.effect}_{f.candidate.target}.toml")
+                                work / f"without_{f.candidate.effect}_{f.candidate.target}.toml",
+                                resume)
             check = compare(reduced, current, scatter, capture, settings)
             f.evidence["still_needed"] = check.to_json()
             if not check.accepted:

@@ -21,15 +21,19 @@ for a discovery.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
 from abs.diagnosis.model import extend_scene, render_problem
-from abs.fitting import FitResult, FitSettings, fit
+from abs.errors import InputError
+from abs.fitting import FitResult, FitSettings, OptimizerState, fit
 from abs.fitting.fit import render_views
+from abs.io.fit_files import load_checkpoint, save_checkpoint
 
 __all__ = ["ModelFit", "Comparison", "fit_model", "compare", "HOLDOUT_Z"]
 
@@ -71,9 +75,15 @@ class ModelFit:
 
 
 def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, settings: FitSettings,
-              path: Path) -> ModelFit:
+              path: Path, resume: bool = False) -> ModelFit:
     """Fit ``scene`` extended by ``candidates`` (its ``[fit]`` parameters and theirs) from
     ``start`` values; the extended scene file is written to ``path``.
+
+    The fit's optimiser state is checkpointed after every iteration next to ``path``
+    (``<stem>.checkpoint/checkpoint.json``). With ``resume``, a checkpoint of the same fit (same
+    extended scene, capture, parameters, start and settings) is continued: a finished fit then
+    costs only its final renderings, an interrupted one goes on where it stopped; a checkpoint of
+    another fit is ignored and overwritten.
 
     The parameters of effects with a vanishing derivative at null (rough glass, subsurface
     spread) are held at their ``start`` values, the amount the short fit's scan of crossed errors
@@ -91,8 +101,29 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     if any(effect(c.effect).full_resolution for c in candidates):
         settings = replace(settings, downsample=1)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
-    result = fit(extended, capture, names, settings, initial=initial)
+    folder = path.with_name(path.stem + ".checkpoint")
+    identity = _fit_identity(extended, capture, names, initial, settings)
+    state = _saved_state(folder, identity) if resume else None
+    result = fit(extended, capture, names, settings, initial=initial, resume=state,
+                 on_iteration=lambda s: save_checkpoint(folder, identity, s.to_dict()))
     return ModelFit(tuple(candidates), extended, result, held)
+
+
+def _fit_identity(extended, capture, names, initial: dict, settings: FitSettings) -> dict:
+    """What makes two model fits the same fit (for checkpoints)."""
+    folder = capture.folder if hasattr(capture, "folder") else Path(capture)
+    text = Path(extended.source).read_bytes()
+    return {"scene": hashlib.sha256(text).hexdigest(), "capture": str(Path(folder).resolve()),
+            "parameters": list(names), "initial": {n: np.asarray(v).tolist() for n, v in initial.items()},
+            "settings": json.loads(json.dumps(asdict(settings)))}
+
+
+def _saved_state(folder: Path, identity: dict) -> OptimizerState | None:
+    try:
+        saved = load_checkpoint(folder, identity)
+    except InputError:  # another fit's checkpoint (the diagnosis went another way): start afresh
+        return None
+    return None if saved is None else OptimizerState.from_dict(saved)
 
 
 @dataclass(frozen=True)
