@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.camera.pinhole import project
-from abs.render.jit import from_numpy, opaque
+from abs.render.jit import from_numpy, opaque, seed32
 
 __all__ = ["MovingMesh", "edge_adjacency", "silhouette_edges", "boundary_term"]
 
@@ -132,7 +132,7 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
     # Radiance just on either side of the edge (detached).
     with dr.suspend_grad():
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed, n_samples)
+        sampler.seed(seed32(seed), n_samples)
         radiance = []
         for sign in (1.0, -1.0):
             u = from_numpy(mi.Float, x[:, 0] + sign * _PROBE_OFFSET_PX * normal[:, 0])

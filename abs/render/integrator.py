@@ -38,6 +38,7 @@ from abs.render.bsdfs.dielectric import DielectricBSDF
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
+from abs.render.jit import seed32
 
 __all__ = ["PathTracer"]
 
@@ -106,7 +107,7 @@ class PathTracer:
         w, h = camera.width, camera.height
         n = w * h * spp
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed, n)
+        sampler.seed(seed32(seed), n)
         idx = dr.arange(mi.UInt32, n)
         pixel = idx // spp
         px = mi.Float(pixel % w)

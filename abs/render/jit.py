@@ -5,7 +5,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-__all__ = ["from_numpy", "opaque"]
+__all__ = ["from_numpy", "opaque", "seed32"]
 
 # Dr.Jit's LLVM backend wraps NumPy memory without copying and compiles the pointer's alignment
 # into the kernel (``align 64`` when the address happens to be a multiple of 64, else
@@ -43,3 +43,11 @@ def opaque(array_type, *value):
         x = array_type(*value)
     dr.make_opaque(x)
     return x
+
+
+def seed32(seed: int) -> int:
+    """``seed`` wrapped to the 32 bits a Mitsuba sampler takes.
+
+    Render seeds are derived by products (call seed x view x spp batch x colour pass) and exceed
+    2^32 for large call seeds; wrapping keeps them distinct for every seed a run uses."""
+    return int(seed) & 0xFFFFFFFF

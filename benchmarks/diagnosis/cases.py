@@ -30,6 +30,9 @@ class Case:
     only approximates (as in real photographs). ``upscale`` multiplies the suite's image width and
     height for this case: an effect finer than the suite's pixels (a subsurface spread of
     millimetres) needs photographs that resolve it, as real megapixel photographs do.
+    ``photo_spp_factor`` multiplies the photographs' samples per pixel: a truth renderer that
+    converges slowly (a random walk through a scattering medium) needs more samples for its
+    Monte-Carlo noise to stay below the sensor noise, as it is in real photographs.
     """
 
     name: str
@@ -38,6 +41,7 @@ class Case:
     truth: dict = field(default_factory=dict)
     photographs: tuple[str, dict] | None = None
     upscale: int = 1
+    photo_spp_factor: int = 1
 
     def describe_truth(self) -> str:
         if self.photographs is None:
@@ -97,7 +101,8 @@ CASES = [
     Case("sphere-env_distance", "sphere", ("env_distance",), {"environment.inverse_distance": [1.0]}),
     Case("sphere-surface_roughness", "sphere", ("surface_roughness",), {"glass.roughness": [0.15]}),
     Case("cloth-subsurface", "cloth", ("subsurface",),
-         photographs=("scattering_cloth", {"mean_free_path": 0.002}), upscale=2),
+         photographs=("scattering_cloth", {"mean_free_path": 0.002}), upscale=2,
+         photo_spp_factor=64),
     Case("sphere-subsurface", "sphere", ("subsurface",), {"cloth.subsurface": [0.015]}, upscale=2),
     Case("box-pose", "box", ("pose",), {"box.pose": [0.01, 0.0, -0.008, 0.0, 0.1, 0.0]}),
     Case("box-pose-4mm", "box", ("pose",), {"box.pose": [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]}),
