@@ -16,13 +16,18 @@ ROOT = Path(__file__).resolve().parents[1]
 PARAMETER = "glass.absorption"
 
 
-def make_dataset(folder: Path, absorption: np.ndarray, width: int, height: int, seed: int) -> Path:
+def make_dataset(folder: Path, absorption: np.ndarray, width: int, height: int, seed: int,
+                 photo_spp: int = 512) -> Path:
     """Write ``folder/scene.toml`` (the default scene with ``absorption``, 1/m per RGB) and a
-    capture ``folder/capture`` of 2 views (the second held out); returns the capture folder."""
+    capture ``folder/capture`` of 2 views (the second held out); returns the capture folder.
+
+    ``photo_spp``: the photographs' samples per pixel. Their Monte-Carlo noise is in no noise
+    model (real photographs have none), and through glass it is heavy-tailed: keep it far below
+    the sampler's."""
     scene = load_scene(ROOT / "scenes/default/scene.toml")
     folder.mkdir(parents=True, exist_ok=True)
     write_scene(scene, folder / "scene.toml", {PARAMETER: np.asarray(absorption, float)})
     simulate_capture(load_scene(folder / "scene.toml"), folder / "capture", n_cameras=2, n_holdout=1,
-                     width=width, height=height, spp=512, shot_noise=1e-4, read_noise=0.003,
+                     width=width, height=height, spp=photo_spp, shot_noise=1e-4, read_noise=0.003,
                      seed=seed)
     return folder / "capture"

@@ -81,6 +81,78 @@ def test_crossed_likelihood_posterior_matches_closed_form():
     _check_against(backend, progress, mean, cov)
 
 
+class _LinearRenderPosterior:
+    """A stand-in for RenderPosterior: ``r_s = A theta + e_s - y`` for two fixed seeds, with the
+    attributes :func:`abs.sampling.mode.find_mode` reads."""
+
+    spp, seeds = 1, (1, 2)
+
+    def __init__(self, A, y, noise, variance):
+        self.A, self.y, self.noise, self.variance = A, y, noise, variance
+
+    def problem(self):
+        return self
+
+    def jacobian(self, theta, spp, seed):
+        return self.A
+
+    def residuals(self, theta, spp=None, seed=None):
+        if seed is not None:  # FitProblem.residuals: (r, J) of a render seeded ``seed``
+            return self.A @ theta + self.noise(seed) - self.y, None
+        return [self.A @ theta + self.noise(s) - self.y for s in self.seeds]
+
+    def __call__(self, theta):
+        return ResidualPosterior(self.residuals, self.variance, _wide_prior(3))(theta)
+
+
+def test_find_mode_reaches_the_crossed_likelihoods_maximum():
+    """Gauss-Newton from a start 30 standard deviations away lands on the closed-form maximum of
+    the crossed likelihood (the average evaluation's least squares) with its Laplace sd."""
+    from abs.sampling.mode import find_mode
+
+    A, y = _linear_problem(seed=5)
+    rng = np.random.default_rng(6)
+    fixed = {1: 0.3 * rng.normal(size=y.size), 2: 0.3 * rng.normal(size=y.size)}
+    noise = fixed.__getitem__
+    variance = np.full(y.size, SIGMA ** 2 + 0.3 ** 2 / 2)
+    cov = np.linalg.inv(A.T @ (A / variance[:, None]))
+    mode = cov @ A.T @ ((y - (fixed[1] + fixed[2]) / 2) / variance)
+    start = mode + 30 * np.sqrt(np.diag(cov))
+    theta, sd = find_mode(_LinearRenderPosterior(A, y, noise, variance), start,
+                          np.full(3, -50.0), np.full(3, 50.0))
+    np.testing.assert_allclose(theta, mode, atol=1e-6)
+    np.testing.assert_allclose(sd, np.sqrt(np.diag(cov)), rtol=1e-9)
+    # Bounds hold: with the upper bound below the mode, the start stays inside it.
+    upper = mode - 0.1
+    theta, _ = find_mode(_LinearRenderPosterior(A, y, noise, variance), mode - 1.0,
+                         np.full(3, -50.0), upper)
+    assert np.all(theta < upper)
+
+
+@pytest.mark.parametrize("true_ratio", [1.0, 4.0])
+def test_seed_pair_calibration_measures_and_recentres(true_ratio):
+    """Render noise whose real variance is ``true_ratio`` times the modelled one: the measured
+    ratio finds it, the scale is never below 1, and the offset makes the chain pair's residuals
+    those of the average over all pairs."""
+    from abs.sampling.calibration import calibrate_render_noise
+
+    A, y = _linear_problem(seed=7)
+    modelled = np.full(y.size, 0.3 ** 2)  # var_render / 2 the noise model believes
+
+    def noise(seed):  # each render's own noise, variance true_ratio * 2 * modelled
+        return np.sqrt(true_ratio * 2 * modelled) * np.random.default_rng(seed).normal(size=y.size)
+
+    posterior = _LinearRenderPosterior(A, y, noise, modelled + SIGMA ** 2)
+    theta = np.zeros(3)
+    found = calibrate_render_noise(posterior, theta, modelled, pairs=400, seed=100)
+    np.testing.assert_allclose(found.ratio, true_ratio, rtol=0.2)
+    assert found.scale >= 1.0 and found.scale == pytest.approx(max(1.0, found.ratio.max()))
+    assert found.pairs == 401
+    every = [noise(s) for s in (1, 2, *range(100, 900))]
+    np.testing.assert_allclose(np.mean(posterior.residuals(theta), axis=0) + found.offset,
+                               A @ theta + np.mean(every, axis=0) - y, atol=1e-12)
+
+
 def test_bounds_and_priors():
     prior = LogPrior(np.array([0.0, 1.0]), np.array([np.inf, 3.0]), np.array([0.0, 1.5]),
                      np.array([np.inf, 0.1]))

@@ -15,7 +15,7 @@ def add_parser(sub) -> None:
     p.add_argument("--from-fit", type=Path, metavar="FITDIR",
                    help="start around this fit (FITDIR/fit.json) instead of fitting first")
     p.add_argument("--walkers", type=int, default=0, help="ensemble size (default: max(8, 4 P))")
-    p.add_argument("--spp", type=int, default=64,
+    p.add_argument("--spp", type=int, default=512,
                    help="samples per pixel of each of the two likelihood renders per view")
     p.add_argument("--downsample", type=int, default=2, help="compare images reduced by this factor")
     p.add_argument("--clamp", type=float, default=None, help="clamp renderings at this value")
@@ -28,6 +28,8 @@ def add_parser(sub) -> None:
                    help="local worker processes for likelihood evaluations (1: this process; "
                         "default: 2, or 1 on a one-core machine)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): evaluate there")
+    p.add_argument("--calibration-pairs", type=int, default=8,
+                   help="seed pairs that calibrate the render variance at the mode (0: off)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resume", action="store_true", help="continue the chain in OUT/chain.h5")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
@@ -68,7 +70,8 @@ def run(args) -> int:
     settings = SampleSettings(spp=args.spp, downsample=args.downsample, clamp=args.clamp,
                               walkers=args.walkers, max_steps=args.max_steps,
                               max_renders=args.max_renders, predictive_draws=args.draws,
-                              eval_spp=args.eval_spp, seed=args.seed)
+                              eval_spp=args.eval_spp, seed=args.seed,
+                              calibration_pairs=args.calibration_pairs)
     if args.workers < 1:
         raise InputError(None, "--workers", f"must be >= 1, got {args.workers}")
     scene = load_scene(args.scene)

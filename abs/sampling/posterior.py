@@ -121,6 +121,10 @@ class RenderPosterior:
     clamp : float or None
     variant : str or None
         Mitsuba variant for worker processes.
+    offset : ndarray, shape (M,), optional
+        Added to both renders' residuals: the mean residual of further seed pairs minus this
+        pair's, at the mode, times ``K / (K + 1)`` (:mod:`abs.sampling.calibration`), so that the
+        residuals stand for the average of all ``K + 1`` pairs near the mode.
     """
 
     scene: object
@@ -133,6 +137,7 @@ class RenderPosterior:
     prior: LogPrior
     clamp: float | None = None
     variant: str | None = None
+    offset: np.ndarray | None = None
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
     def problem(self):
@@ -163,9 +168,10 @@ class RenderPosterior:
         cache[self.token] = problem
 
     def residuals(self, theta: np.ndarray) -> list[np.ndarray]:
-        """Residuals of the two fixed-seed renders at physical ``theta``."""
+        """Residuals of the two fixed-seed renders at physical ``theta`` (plus ``offset``)."""
         problem = self.problem()
-        return [problem.residuals(theta, self.spp, seed)[0] for seed in self.seeds]
+        shift = 0.0 if self.offset is None else self.offset
+        return [problem.residuals(theta, self.spp, seed)[0] + shift for seed in self.seeds]
 
     def __call__(self, theta: np.ndarray) -> float:
         return ResidualPosterior(self.residuals, self.variance, self.prior)(theta)

@@ -118,8 +118,10 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
             found = "; ".join(f"{p}: {_fmt(v)}" for p, v in r["recovered"].items()
                               if p not in r["truth"]) or "nothing fitted"
             rec = "; ".join(x for x in (rec, f"{found} vs photographs by {r['truth_renderer']}") if x)
-        size = r.get("image_size")
-        name = r["case"] if not size or size == config_size else f"{r['case']} ({size[0]}x{size[1]})"
+        size, photo_spp = r.get("image_size"), r.get("photo_spp", config.get("photo_spp"))
+        extra = ([f"{size[0]}x{size[1]}"] if size and size != config_size else []) + \
+            ([f"photographs {photo_spp} spp"] if photo_spp != config.get("photo_spp") else [])
+        name = r["case"] + (f" ({', '.join(extra)})" if extra else "")
         lines.append(f"| {name} | {', '.join(r['hidden']) or '(none)'} | "
                      f"{', '.join(r['verdict']) or '(empty)'} | {_holdout(r)} | {rec or '-'} | "
                      f"{r['wall_s']:.0f} |")
