@@ -10,10 +10,12 @@ calibration"). So, at the mode ``theta``, ``K`` further seed pairs are rendered 
 
 - **Recentring.** Their mean residual minus the chain pair's, times ``K / (K + 1)``, is added to
   the chain's residuals (``RenderPosterior.offset``): near the mode they then stand for the average
-  of all ``K + 1`` pairs, whose noise is ``K + 1`` times smaller and far less heavy-tailed; the
-  likelihood's render variance is divided accordingly (``NoiseModel.render_pairs``). The offset
-  is fixed (exact at the mode, first order around it), so the likelihood stays smooth and the
-  crossed form's removal of the noise energy is untouched.
+  of all ``K + 1`` pairs, so one unlucky chain pair no longer sets the posterior's centre. The
+  offset is fixed (exact at the mode, first order around it), so the likelihood stays smooth and
+  the crossed form's removal of the noise energy is untouched. The render variance is *not*
+  divided by ``K + 1``: heavy-tailed estimates at one spp fall short of the mean alike (the rare
+  bright paths are missing from all of them), a shortfall the pairs' scatter does not show; one
+  pair's variance leaves room for it (measured in docs/sampling.md).
 - **Calibration.** With ``J`` the Jacobian, ``W`` the weights and ``C = (J^T W J)^-1``, one
   Gauss-Newton step for pair ``k`` moves the mode by ``d_k = -C J^T W rbar_k``. The variance of
   ``d`` over the ``K + 1`` pairs is the render noise's share of a pair's mode scatter; the
@@ -42,15 +44,12 @@ class SeedPairCalibration:
     ratio : ndarray, shape (P,)
         Measured over modelled variance of a pair's mode offset, per scalar.
     offset : ndarray, shape (M,)
-        Residual offset recentring the chain's pair on the mean of all pairs.
-    pairs : int
-        ``K + 1``: the pairs the recentred residuals stand for.
+        Residual offset recentring the chain's pair on the mean of all ``K + 1`` pairs.
     """
 
     scale: float
     ratio: np.ndarray
     offset: np.ndarray
-    pairs: int
 
 
 def calibrate_render_noise(posterior, theta: np.ndarray, render_part: np.ndarray, pairs: int,
@@ -83,4 +82,4 @@ def calibrate_render_noise(posterior, theta: np.ndarray, render_part: np.ndarray
     modelled = np.einsum("pm,m,pm->p", gain, render_part, gain)
     ratio = measured / np.maximum(modelled, 1e-300)
     shift = pairs / (pairs + 1) * (np.mean(others, axis=0) - own)
-    return SeedPairCalibration(max(1.0, float(np.max(ratio))), ratio, shift, pairs + 1)
+    return SeedPairCalibration(max(1.0, float(np.max(ratio))), ratio, shift)

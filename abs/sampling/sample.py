@@ -168,8 +168,8 @@ class SampleResult:
             "wall_s": round(self.wall_s, 3),
             "noise": {**self.noise.to_dict(), "reduced_chi2_at_mode": self.reduced_chi2},
             "likelihood": "crossed Gaussian of two fixed-seed renders recentred on further seed "
-                          "pairs, variance = photograph + render_scale x render / (2 "
-                          "render_pairs) (docs/sampling.md)",
+                          "pairs, variance = photograph + render_scale x render / 2 "
+                          "(docs/sampling.md)",
             "spp": self.settings.spp,
             "downsample": self.settings.downsample,
         }
@@ -233,7 +233,6 @@ def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
         g.attrs["start"] = json.dumps(start)
         g["photo_variance"] = noise.photo_variance
         g.attrs["render_scale"] = float(noise.render_scale)
-        g.attrs["render_pairs"] = int(noise.render_pairs)
         if offset is not None:
             g["residual_offset"] = offset
         for k, v in enumerate(noise.render_variance):
@@ -249,8 +248,7 @@ def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray
             n = len(g["photo_variance"])
             noise = NoiseModel(np.asarray(g["photo_variance"]),
                                [np.asarray(g[f"render_variance_{k}"]) for k in range(n)],
-                               render_scale=float(g.attrs.get("render_scale", 1.0)),
-                               render_pairs=int(g.attrs.get("render_pairs", 1)))
+                               render_scale=float(g.attrs.get("render_scale", 1.0)))
             offset = np.asarray(g["residual_offset"]) if "residual_offset" in g else None
     except (OSError, KeyError, json.JSONDecodeError) as exc:
         raise InputError(path, _GROUP, f"not an abs chain file ({exc}); delete it to start over") from None
@@ -404,7 +402,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
         if settings.calibration_pairs:
             found = calibrate_render_noise(posterior, theta_start, noise.render_part(masks),
                                            settings.calibration_pairs, settings.seed + 700)
-            noise = replace(noise, render_scale=found.scale, render_pairs=found.pairs)
+            noise = replace(noise, render_scale=found.scale)
             offset = found.offset
             posterior = posterior_with(noise, offset)
             theta_start, mode_sd = find_mode(posterior, theta_start, vector.lower, vector.upper,
