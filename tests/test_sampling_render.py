@@ -42,7 +42,6 @@ def test_true_absorption_lies_inside_the_90_percent_intervals(glass_scene_dir, c
                     start={"glass.absorption": {"value": entry["value"], "stderr": entry["stderr"]}})
     s = result.summary()["parameters"]["glass.absorption"]
     s["render_scale"] = result.noise.render_scale  # shown if an assertion fails
-    print({k: np.round(s[k], 2).tolist() for k in ("q05", "mean", "q95", "render_scale")})
     truth = np.array(TRUE_ABSORPTION)
     assert np.all(np.array(s["q05"]) < truth) and np.all(truth < np.array(s["q95"])), s
     # Not vacuous (the prior is flat on [0, inf)): each interval is narrower than the value...
