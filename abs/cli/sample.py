@@ -29,7 +29,8 @@ def add_parser(sub) -> None:
                         "default: 2, or 1 on a one-core machine)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): evaluate there")
     p.add_argument("--calibration-pairs", type=int, default=8,
-                   help="seed pairs that calibrate the render variance at the mode (0: off)")
+                   help="further seed pairs at the mode that recentre the likelihood and "
+                        "calibrate its render variance (0: off)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resume", action="store_true", help="continue the chain in OUT/chain.h5")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
