@@ -148,6 +148,11 @@ def test_seed_pair_calibration_measures_and_recentres(true_ratio):
     np.testing.assert_allclose(found.ratio, true_ratio, rtol=0.2)
     assert found.scale >= 1.0 and found.scale == pytest.approx(max(1.0, found.ratio.max()))
     every = [noise(s) for s in (1, 2, *range(100, 900))]
+    # A parameter the photographs do not see (a zero column) gets no ratio, not a failure.
+    blind = _LinearRenderPosterior(np.column_stack([A, np.zeros(y.size)]), y, noise,
+                                   modelled + SIGMA ** 2)
+    partial = calibrate_render_noise(blind, np.zeros(4), modelled, pairs=50, seed=100)
+    assert np.isnan(partial.ratio[3]) and np.isfinite(partial.ratio[:3]).all() and partial.scale >= 1
     np.testing.assert_allclose(np.mean(posterior.residuals(theta), axis=0) + found.offset,
                                A @ theta + np.mean(every, axis=0) - y, atol=1e-12)
 

@@ -42,7 +42,8 @@ class SeedPairCalibration:
     scale : float
         ``max(1, max_i ratio_i)``: the factor on the render variance.
     ratio : ndarray, shape (P,)
-        Measured over modelled variance of a pair's mode offset, per scalar.
+        Measured over modelled variance of a pair's mode offset, per scalar (NaN where the
+        photographs do not constrain it).
     offset : ndarray, shape (M,)
         Residual offset recentring the chain's pair on the mean of all ``K + 1`` pairs.
     """
@@ -72,7 +73,9 @@ def calibrate_render_noise(posterior, theta: np.ndarray, render_part: np.ndarray
     problem = posterior.problem()
     weight = 1.0 / posterior.variance
     jac = 0.5 * sum(problem.jacobian(theta, posterior.spp, s) for s in posterior.seeds)
-    gain = np.linalg.solve(jac.T @ (weight[:, None] * jac), (jac * weight[:, None]).T)  # (P, M)
+    # pinv: a direction the photographs do not constrain gets no gain (and no ratio) instead of
+    # failing the run.
+    gain = np.linalg.pinv(jac.T @ (weight[:, None] * jac)) @ (jac * weight[:, None]).T  # (P, M)
     own = 0.5 * sum(posterior.residuals(theta))
     others = [0.5 * (problem.residuals(theta, posterior.spp, seed + 2 * k)[0]
                      + problem.residuals(theta, posterior.spp, seed + 2 * k + 1)[0])
@@ -80,6 +83,7 @@ def calibrate_render_noise(posterior, theta: np.ndarray, render_part: np.ndarray
     offsets = np.array([-gain @ r for r in [own, *others]])
     measured = offsets.var(axis=0, ddof=1)
     modelled = np.einsum("pm,m,pm->p", gain, render_part, gain)
-    ratio = measured / np.maximum(modelled, 1e-300)
+    ratio = np.where(modelled > 0, measured / np.where(modelled > 0, modelled, 1.0), np.nan)
     shift = pairs / (pairs + 1) * (np.mean(others, axis=0) - own)
-    return SeedPairCalibration(max(1.0, float(np.max(ratio))), ratio, shift)
+    finite = ratio[np.isfinite(ratio)]
+    return SeedPairCalibration(max(1.0, float(finite.max())) if finite.size else 1.0, ratio, shift)
