@@ -85,7 +85,7 @@ class _LinearRenderPosterior:
     """A stand-in for RenderPosterior: ``r_s = A theta + e_s - y`` for two fixed seeds, with the
     attributes :func:`abs.sampling.mode.find_mode` reads."""
 
-    spp, seeds = 1, (1, 2)
+    spp, seeds, prior = 1, (1, 2), _wide_prior(3)
 
     def __init__(self, A, y, noise, variance):
         self.A, self.y, self.noise, self.variance = A, y, noise, variance
@@ -102,7 +102,7 @@ class _LinearRenderPosterior:
         return [self.A @ theta + self.noise(s) - self.y for s in self.seeds]
 
     def __call__(self, theta):
-        return ResidualPosterior(self.residuals, self.variance, _wide_prior(3))(theta)
+        return ResidualPosterior(self.residuals, self.variance, self.prior)(theta)
 
 
 def test_find_mode_reaches_the_crossed_likelihoods_maximum():

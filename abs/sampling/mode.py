@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from abs.sampling.posterior import ResidualPosterior
+
 __all__ = ["find_mode"]
 
 
@@ -44,13 +46,18 @@ def find_mode(posterior, theta: np.ndarray, lower: np.ndarray, upper: np.ndarray
     """
     problem = posterior.problem()
     weight = 1.0 / posterior.variance
+
+    def evaluate(t: np.ndarray):
+        # The log-posterior and the residuals it came from: the next step reuses them.
+        rs = posterior.residuals(t)
+        return ResidualPosterior(lambda _: rs, posterior.variance, posterior.prior)(t), rs
+
     span = np.where(np.isfinite(upper - lower), upper - lower, 1.0)
     lo, hi = lower + 1e-6 * span, upper - 1e-6 * span
     theta = np.clip(np.asarray(theta, np.float64), lo, hi)
-    current = posterior(theta)
+    current, (r_a, r_b) = evaluate(theta)
     sd = np.full(theta.size, np.nan)
     for _ in range(max_steps):
-        r_a, r_b = posterior.residuals(theta)
         j_a, j_b = (problem.jacobian(theta, posterior.spp, seed) for seed in posterior.seeds)
         g = 0.5 * (j_a.T @ (weight * r_b) + j_b.T @ (weight * r_a))
         h = 0.5 * (j_a.T @ (weight[:, None] * j_b) + j_b.T @ (weight[:, None] * j_a))
@@ -62,9 +69,9 @@ def find_mode(posterior, theta: np.ndarray, lower: np.ndarray, upper: np.ndarray
         moved = False
         for _ in range(4):
             candidate = np.clip(theta + step, lo, hi)
-            value = posterior(candidate)
+            value, rs = evaluate(candidate)
             if value > current:
-                theta, current, moved = candidate, value, True
+                theta, current, (r_a, r_b), moved = candidate, value, rs, True
                 break
             step = step / 2
         if not moved or np.all(np.abs(step) < tolerance * np.where(sd > 0, sd, np.inf)):

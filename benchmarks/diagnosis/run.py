@@ -52,9 +52,10 @@ def run_case(case, root: Path, args) -> dict:
         kind, extra = case.photographs
         def render(compiled, camera, spp, seed):
             return TRUTH_RENDERERS[kind](compiled, camera, spp, seed, **extra)
+    photo_spp = args.photo_spp * case.photo_spp_factor
     simulate_capture(load_scene(truth_path), folder / "capture", n_cameras=args.views,
                      width=args.width * case.upscale,
-                     height=args.height * case.upscale, spp=args.photo_spp * case.photo_spp_factor, shot_noise=1e-4,
+                     height=args.height * case.upscale, spp=photo_spp, shot_noise=1e-4,
                      read_noise=0.003, seed=3, render=render)
     settings = FitSettings(spp=args.spp, downsample=args.downsample, max_iterations=args.iterations,
                            refinement_steps=args.refinement, eval_spp=args.eval_spp)
@@ -68,7 +69,7 @@ def run_case(case, root: Path, args) -> dict:
     final_holdout = result.final.rmse("holdout")
     return {"case": case.name, "scene": case.scene, "hidden": list(case.hidden),
             "image_size": [args.width * case.upscale, args.height * case.upscale],
-            "photo_spp": args.photo_spp * case.photo_spp_factor,
+            "photo_spp": photo_spp,
             "verdict": out["verdict"], "first_correct": bool(case.hidden) and out["verdict"][:1] == [case.hidden[0]],
             "all_found": set(case.hidden) <= set(out["verdict"]),
             "exact": sorted(out["verdict"]) == sorted(case.hidden),
