@@ -123,6 +123,22 @@ parameters = {fit!r}
 """.replace("'", '"')
 
 
+def box_object_toml(pose: str | None = None) -> str:
+    """A painted box (``box.ply``) as scene-file text; ``pose`` is written as given when given
+    (a list, or a ``str.format`` placeholder such as ``"{pose}"``)."""
+    line = "" if pose is None else f"pose = {pose}\n"
+    return f"""
+[materials.paint]
+type = "diffuse"
+reflectance = [0.6, 0.4, 0.3]
+
+[[objects]]
+name = "box"
+mesh = "box.ply"
+material = "paint"
+{line}"""
+
+
 @pytest.fixture(scope="session")
 def small_scene_dir(tmp_path_factory) -> Path:
     """A glass icosphere on a diffuse floor in front of a textured backdrop, lit by an env map."""

@@ -17,7 +17,7 @@ import trimesh
 from abs import load_scene
 from abs.fitting import FitSettings, fit
 from abs.simulate import simulate_capture
-from conftest import make_env, make_sphere_and_floor, write_mesh
+from conftest import box_object_toml, make_env, make_sphere_and_floor, write_mesh
 
 pytestmark = pytest.mark.slow
 
@@ -54,17 +54,7 @@ mesh = "sphere.ply"
 material = "glass"
 """
 
-_BOX = """
-[materials.paint]
-type = "diffuse"
-reflectance = [0.6, 0.4, 0.3]
-
-[[objects]]
-name = "box"
-mesh = "box.ply"
-material = "paint"
-pose = {pose}
-"""
+_BOX = box_object_toml(pose="{pose}")
 
 
 def _assets(root: Path) -> None:

@@ -35,11 +35,13 @@ def test_true_absorption_lies_inside_the_90_percent_intervals(glass_scene_dir, c
                                                                    refinement_steps=2),
                  initial={"glass.absorption": [3.0, 3.0, 6.0]})
     entry = fitted.summary()["parameters"]["glass.absorption"]
+    stages = []
     result = sample(scene, capture, ["glass.absorption"],
                     SampleSettings(spp=512, downsample=2, walkers=8, max_steps=30, predictive_draws=2,
                                    eval_spp=4),
                     chain_path=tmp_path / "chain.h5",
-                    start={"glass.absorption": {"value": entry["value"], "stderr": entry["stderr"]}})
+                    start={"glass.absorption": {"value": entry["value"], "stderr": entry["stderr"]}},
+                    on_stage=stages.append)
     s = result.summary()["parameters"]["glass.absorption"]
     s["render_scale"] = result.noise.render_scale  # shown if an assertion fails
     truth = np.array(TRUE_ABSORPTION)
@@ -49,6 +51,10 @@ def test_true_absorption_lies_inside_the_90_percent_intervals(glass_scene_dir, c
     # ... and the noise model explains the residuals at the fit (chi^2 per residual near 1).
     assert 0.5 < result.reduced_chi2 < 2.0
     assert result.renders > 30 * 8 * 2 and len(result.predictive) == 2
+    # The minutes before the first chain step are reported, in order (the fit was given).
+    assert stages == ["noise model at the starting point", "mode of the likelihood",
+                      "noise model at the mode", "render-noise calibration (8 seed pairs)", "chain",
+                      "posterior predictive (2 draws)"], stages
 
 
 def _sample(scene, capture, out, fit_dir, *extra):

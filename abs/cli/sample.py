@@ -91,9 +91,13 @@ def run(args) -> int:
         tau = "-" if progress.tau is None else f"{float(progress.tau.max()):.3g}"
         bar.set_postfix(acc=f"{progress.acceptance_fraction:.2f}", tau=tau)
 
+    def on_stage(message: str) -> None:
+        # The chain's own steps fill the bar; everything around it is named in its description.
+        bar.set_description_str(f"sample [{message}]")
+
     with evaluation_pool(args.workers, args.scheduler) as pool:
         result = sample(scene, args.capture, names, settings, out / CHAIN_FILE, start=start,
-                        resume=args.resume, pool=pool, on_step=on_step,
+                        resume=args.resume, pool=pool, on_step=on_step, on_stage=on_stage,
                         truth=read_truth(args.capture, chosen))
     bar.close()
     summary = write_sample_folder(out, result, report=not args.no_report)

@@ -206,13 +206,17 @@ def read_start(fit_json: str | Path, names) -> dict[str, dict]:
     return out
 
 
-def _fit_start(scene, capture, names, settings: SampleSettings) -> dict[str, dict]:
+def _fit_start(scene, capture, names, settings: SampleSettings,
+               stage: Callable[[str], None]) -> dict[str, dict]:
     from abs.fitting import FitSettings, fit
+
+    def on_iteration(state) -> None:
+        stage(f"starting fit, iteration {state.iteration} (RMSE {state.history[-1]['loss']:.4g})")
 
     result = fit(scene, capture, names, FitSettings(
         spp=settings.spp, downsample=settings.downsample, clamp=settings.clamp,
         max_iterations=settings.fit_iterations, refinement_steps=settings.fit_refinement_steps,
-        seed=settings.seed))
+        seed=settings.seed), on_iteration=on_iteration)
     parameters = result.summary()["parameters"]
     return {n: {"value": parameters[n]["value"], "stderr": parameters[n]["stderr"]} for n in names}
 
@@ -311,6 +315,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
            chain_path: str | Path = "chain.h5", start: dict[str, dict] | None = None,
            resume: bool = False, pool=None,
            on_step: Callable[[EnsembleProgress], None] | None = None,
+           on_stage: Callable[[str], None] | None = None,
            truth: dict[str, list] | None = None, variant: str | None = None) -> SampleResult:
     """Sample the posterior of scene parameters given a capture's training views.
 
@@ -333,6 +338,10 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
         From :func:`abs.sampling.pools.evaluation_pool`.
     on_step : callable, optional
         Called with an :class:`EnsembleProgress` after every step.
+    on_stage : callable, optional
+        Called with a short description of each preparation stage before the chain (starting
+        fit, noise model, mode search, seed-pair calibration; minutes on a real capture) and of
+        the posterior predictive renders after it.
     truth : dict, optional
         Known true values, copied into the summary.
     variant : str, optional
@@ -350,6 +359,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     from abs.fitting.problem import FitProblem
 
     t0 = time.perf_counter()
+    stage = on_stage or (lambda message: None)
     chain_path = Path(chain_path)
     scene, compiled, capture_obj, names = prepare(scene, capture, parameters)
     capture = capture_obj.folder
@@ -362,7 +372,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
         noise, start, offset = _read_meta(chain_path, identity)
     else:
         chain_path.unlink(missing_ok=True)
-        start = start or _fit_start(scene, capture, names, settings)
+        start = start or _fit_start(scene, capture, names, settings, stage)
     theta_fit = np.concatenate([np.asarray(start[n]["value"], np.float64) for n in names])
     if theta_fit.size != vector.size:
         raise InputError(None, "start", f"{theta_fit.size} values for {vector.size} scalars of {names}")
@@ -390,9 +400,12 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
         # the noise model again there (the fit's misfit would inflate the photograph variance),
         # a last step with it, then further seed pairs recentre and calibrate the render noise
         # (abs/sampling/calibration.py) and the mode is found again.
+        stage("noise model at the starting point")
         noise = _estimate_noise(problem, theta_fit, settings.spp, settings.seed + 500,
                                 settings.noise_renders)
+        stage("mode of the likelihood")
         theta_start, _ = find_mode(posterior_with(noise), theta_fit, vector.lower, vector.upper)
+        stage("noise model at the mode")
         noise = _estimate_noise(problem, theta_start, settings.spp, settings.seed + 500,
                                 settings.noise_renders)
         posterior = posterior_with(noise)
@@ -400,6 +413,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
                                          max_steps=2)
         offset = None
         if settings.calibration_pairs:
+            stage(f"render-noise calibration ({settings.calibration_pairs} seed pairs)")
             found = calibrate_render_noise(posterior, theta_start, noise.render_part(masks),
                                            settings.calibration_pairs, settings.seed + 700)
             noise = replace(noise, render_scale=found.scale)
@@ -423,6 +437,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     if resuming and backend.shape[1] != vector.size:
         raise InputError(chain_path, "mcmc", f"chain has {backend.shape[1]} scalars, not {vector.size}")
     renders_before = problem.counter.renders
+    stage("chain")
     progress = run_ensemble(posterior, backend, initial, settings.max_steps, max_evaluations,
                             pool=pool, seed=settings.seed, check_every=settings.check_every,
                             on_step=on_step)
@@ -435,6 +450,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
 
     sizes = vector.sizes
     rhat = r_hat(inference_data(chain, names, sizes), names) if chain.shape[0] >= 4 else None
+    stage(f"posterior predictive ({settings.predictive_draws} draws)")
     predictive = posterior_predictive(compiled, capture_obj, vector, chain, settings.predictive_draws,
                                       settings.eval_spp or scene.render.spp, settings.seed + 900,
                                       settings.clamp, problem.counter)

@@ -121,18 +121,6 @@ QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere
          "box-pose", "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
 
 
-_BOX = """
-[materials.paint]
-type = "diffuse"
-reflectance = [0.6, 0.4, 0.3]
-
-[[objects]]
-name = "box"
-mesh = "box.ply"
-material = "paint"
-"""
-
-
 def _conftest() -> None:
     """The test suite's scene builders (``tests/conftest.py``) are the suite's too."""
     import sys
@@ -163,11 +151,11 @@ def build_scene(root: Path, kind: str) -> Path:
     if not (root / "env.exr").exists():
         _assets(root)
     _conftest()
-    from conftest import sphere_scene_toml
+    from conftest import box_object_toml, sphere_scene_toml
 
     fit = {"box": ["environment.scale", "paint.reflectance"], "sphere": ["environment.scale"],
            "cloth": ["environment.scale", "cloth.reflectance"]}[kind]
-    text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (_BOX if kind == "box" else "")
+    text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (box_object_toml() if kind == "box" else "")
     path = root / f"{kind}.toml"
     path.write_text(text)
     return path
