@@ -2,14 +2,16 @@
 on the same posterior, from one run.
 
 One synthetic glass capture (default scene, absorption per RGB channel), one ``abs.fit``; then
-emcee (``abs.sample``'s ensemble, walkers started around the fit) and the independence
-Metropolis-Hastings sampler of ``abs.sampling.independence`` (a Student-t proposal started from
-the fit's Laplace covariance and adapted by importance sampling on a third of its evaluations)
-each evaluate the same :class:`RenderPosterior` a given number of times. Effective sample size per scalar: samples / integrated autocorrelation time (emcee's
-estimator, burn-in removed); the worst scalar counts. Writes
-``benchmarks/results/sampling_efficiency.json``.
+``abs.sample`` prepares the posterior (noise model, mode of the fixed-seed likelihood, seed-pair
+calibration: the same for any sampler, so reported once, apart) and runs emcee's ensemble from the
+mode; the independence Metropolis-Hastings sampler of ``abs.sampling.independence`` (a Student-t
+proposal from the Laplace covariance at the mode, adapted by importance sampling on a third of
+its evaluations) then evaluates the same calibrated :class:`RenderPosterior` as many times.
+Effective sample size per scalar: samples / integrated autocorrelation time (emcee's estimator,
+burn-in removed); the worst scalar counts. Wall time and renders of each sampler are its chain's
+only. Writes ``benchmarks/results/sampling_efficiency.json``.
 
-    python benchmarks/sampling_efficiency.py [--evaluations 240 --width 32 --height 24 --spp 64]
+    python benchmarks/sampling_efficiency.py [--evaluations 240 --width 32 --height 24 --spp 512]
 """
 
 from __future__ import annotations
@@ -39,7 +41,8 @@ def main() -> None:
     p.add_argument("--evaluations", type=int, default=240, help="log-posterior evaluations per sampler")
     p.add_argument("--width", type=int, default=32)
     p.add_argument("--height", type=int, default=24)
-    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--spp", type=int, default=512, help="sampler renders (abs sample's default)")
+    p.add_argument("--fit-spp", type=int, default=64, help="the starting fit's renders")
     p.add_argument("--walkers", type=int, default=8)
     args = p.parse_args()
 
@@ -47,27 +50,32 @@ def main() -> None:
         tmp = Path(tmp)
         capture = make_dataset(tmp, TRUTH, args.width, args.height, seed=11)
         fitted = fit(tmp / "scene.toml", capture, [PARAMETER],
-                     FitSettings(spp=args.spp, downsample=2, max_iterations=8, refinement_steps=2),
+                     FitSettings(spp=args.fit_spp, downsample=2, max_iterations=8, refinement_steps=2),
                      initial={PARAMETER: [6.0, 6.0, 6.0]})
         entry = fitted.summary()["parameters"][PARAMETER]
         steps = args.evaluations // args.walkers - 1
-        t0 = time.perf_counter()
+        stages, t0 = {}, time.perf_counter()
         result = sample(tmp / "scene.toml", capture, [PARAMETER],
                         SampleSettings(spp=args.spp, downsample=2, walkers=args.walkers, max_steps=steps,
                                        predictive_draws=0),
                         chain_path=tmp / "chain.h5",
-                        start={PARAMETER: {"value": entry["value"], "stderr": entry["stderr"]}})
-        wall_emcee = time.perf_counter() - t0
+                        start={PARAMETER: {"value": entry["value"], "stderr": entry["stderr"]}},
+                        on_stage=lambda message: stages.setdefault(message.split(" (")[0],
+                                                                   time.perf_counter()))
+        t_end = time.perf_counter()
         s = result.summary()
         per_eval = 2 * 1  # two fixed-seed renders of the one training view
+        wall_emcee = stages["posterior predictive"] - stages["chain"]
+        preparation = {"wall_s": stages["chain"] - t0,
+                       "renders": s["renders"] - s["evaluations"] * per_eval,
+                       "sample_wall_s": t_end - t0}
         ess_emcee = min((e for e in s["parameters"][PARAMETER]["ess"] if e is not None), default=np.nan)
 
-        # The same posterior (noise model, seeds, compiled scene) for the independence sampler,
-        # proposing from its own Laplace approximation at the fit: J^T diag(1/variance) J with the
-        # per-pixel variance of the likelihood (the fit's Laplace covariance assumes one pixel
-        # variance for all pixels and is too narrow where glass pixels are noisy).
+        # The same calibrated posterior (noise model, seeds, offset, compiled scene) for the
+        # independence sampler, proposing from its own Laplace approximation at the mode:
+        # J^T diag(1/variance) J with the likelihood's per-pixel variance.
         t0 = time.perf_counter()
-        posterior, theta = result.posterior, np.array(entry["value"])
+        posterior, theta = result.posterior, result.mode
         _, J = posterior.problem().residuals(theta, args.spp, posterior.seeds[0], jacobian=True)
         cov = np.linalg.inv(J.T @ (J / posterior.variance[:, None]))
         adapt = args.evaluations // 3
@@ -96,9 +104,13 @@ def main() -> None:
     for name, r in rows.items():
         print(f"{name:<22} {r['evaluations']:>6} {r['wall_s']:>7.1f} {r['ess_min']:>8.1f} "
               f"{r['ess_per_s']:>7.3f} {r['ess_per_render']:>11.4f} {r['acceptance']:>7.2f}")
+    print(f"shared preparation (noise model, mode, calibration): {preparation['wall_s']:.1f} s, "
+          f"{preparation['renders']} renders")
     print(f"ratio independence / emcee: ESS/s {ratios['ess_per_s']:.2f}, ESS/render "
           f"{ratios['ess_per_render']:.2f}")
-    report = {"truth": TRUTH.tolist(), "fit": entry, "samplers": rows,
+    report = {"truth": TRUTH.tolist(), "fit": entry, "mode": result.mode.tolist(),
+              "render_scale": result.noise.render_scale, "preparation": preparation,
+              "samplers": rows,
               "ratio_independence_over_emcee": ratios, "config": vars(args),
               "machine": platform.platform()}
     write_json(RESULTS, json.loads(json.dumps(report, default=float).replace("NaN", "null")))

@@ -80,6 +80,7 @@ def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit
     assert _sample(scene, capture, out, fit_dir, "--max-steps", "2", "--workers", "2") == 0
     first = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
     assert first.shape == (2, 8, 1)
+    first_mode = json.loads((out / "summary.json").read_text())["parameters"]["environment.scale"]["mode"]
     assert _sample(scene, capture, out, fit_dir, "--max-steps", "4", "--resume", "--workers", "1") == 0
     chain = emcee.backends.HDFBackend(str(out / "chain.h5"), read_only=True).get_chain()
     assert chain.shape == (4, 8, 1)
@@ -87,7 +88,8 @@ def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit
 
     summary = json.loads((out / "summary.json").read_text())
     entry = summary["parameters"]["environment.scale"]
-    assert set(entry) >= {"mean", "sd", "q05", "q95", "ess", "tau", "unit", "fit", "truth"}
+    assert set(entry) >= {"mean", "sd", "q05", "q95", "ess", "tau", "unit", "fit", "truth", "mode"}
+    assert entry["mode"] == first_mode  # the resumed run restored where its walkers started
     assert all(len(entry[k]) == 1 for k in ("mean", "sd", "q05", "q95", "ess"))
     assert entry["q05"][0] < entry["mean"][0] < entry["q95"][0] and entry["sd"][0] > 0
     assert summary["steps"] == 4 and summary["walkers"] == 8 and summary["stop_reason"] == "max_steps"

@@ -136,6 +136,7 @@ class SampleResult:
     predictive: list[PredictiveView] = field(default_factory=list, repr=False)
     truth: dict[str, list] | None = None
     posterior: RenderPosterior | None = field(default=None, repr=False)
+    mode: np.ndarray | None = None  # where the walkers started (the likelihood's mode)
 
     def summary(self) -> dict:
         tau = self.progress.tau if self.progress.tau is not None else np.full(len(self.labels), np.nan)
@@ -146,6 +147,8 @@ class SampleResult:
             if self.r_hat is not None:
                 entry["r_hat"] = self.r_hat[offset:offset + n].tolist()
             entry["fit"] = self.start[name]
+            if self.mode is not None:
+                entry["mode"] = self.mode[offset:offset + n].tolist()
             if self.truth and name in self.truth:
                 entry["truth"] = list(self.truth[name])
             offset += n
@@ -228,7 +231,7 @@ def _identity(scene, capture, names, settings: SampleSettings) -> dict:
 
 
 def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
-                offset: np.ndarray | None) -> None:
+                offset: np.ndarray | None, mode: np.ndarray) -> None:
     with h5py.File(path, "a") as f:
         if _GROUP in f:
             del f[_GROUP]
@@ -236,6 +239,7 @@ def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
         g.attrs["identity"] = json.dumps(identity)
         g.attrs["start"] = json.dumps(start)
         g["photo_variance"] = noise.photo_variance
+        g["mode"] = mode
         g.attrs["render_scale"] = float(noise.render_scale)
         if offset is not None:
             g["residual_offset"] = offset
@@ -243,7 +247,8 @@ def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
             g[f"render_variance_{k}"] = v
 
 
-def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray | None]:
+def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray | None,
+                                                    np.ndarray | None]:
     try:
         with h5py.File(path, "r") as f:
             g = f[_GROUP]
@@ -254,13 +259,14 @@ def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray
                                [np.asarray(g[f"render_variance_{k}"]) for k in range(n)],
                                render_scale=float(g.attrs.get("render_scale", 1.0)))
             offset = np.asarray(g["residual_offset"]) if "residual_offset" in g else None
+            mode = np.asarray(g["mode"]) if "mode" in g else None
     except (OSError, KeyError, json.JSONDecodeError) as exc:
         raise InputError(path, _GROUP, f"not an abs chain file ({exc}); delete it to start over") from None
     for key, value in identity.items():
         if saved.get(key) != value:
             raise InputError(path, f"{_GROUP}.{key}", f"chain was sampled with {saved.get(key)!r}, "
                              f"this run has {value!r}; use another --out folder or drop --resume")
-    return noise, start, offset
+    return noise, start, offset, mode
 
 
 def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: int) -> NoiseModel:
@@ -369,7 +375,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     identity = _identity(scene, capture, names, settings)
     resuming = resume and chain_path.exists()
     if resuming:
-        noise, start, offset = _read_meta(chain_path, identity)
+        noise, start, offset, mode = _read_meta(chain_path, identity)
     else:
         chain_path.unlink(missing_ok=True)
         start = start or _fit_start(scene, capture, names, settings, stage)
@@ -389,7 +395,8 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
 
     stderr = np.concatenate([[np.nan if s is None else s for s in start[n]["stderr"]] for n in names])
     stderr = np.where(np.isfinite(stderr) & (stderr > 0), stderr, 0.1 * vector.step)
-    theta_start = theta_fit
+    # A resumed chain reports its chi^2 at the mode it started from (older chain files: the fit).
+    theta_start = mode if resuming and mode is not None else theta_fit
     if resuming:
         posterior = posterior_with(noise, offset)
     else:
@@ -422,6 +429,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
             theta_start, mode_sd = find_mode(posterior, theta_start, vector.lower, vector.upper,
                                              max_steps=2)
         stderr = np.where(np.isfinite(mode_sd) & (mode_sd > 0), mode_sd, stderr)
+        mode = theta_start
     r_a, r_b = posterior.residuals(theta_start)
     reduced_chi2 = float(np.mean(np.square((r_a + r_b) / 2) / posterior.variance))
 
@@ -430,7 +438,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     max_evaluations = None if settings.max_renders is None else settings.max_renders // per_eval
     initial = None
     if not resuming:
-        _write_meta(chain_path, identity, noise, start, offset)
+        _write_meta(chain_path, identity, noise, start, offset, mode)
         initial = _initial_walkers(posterior, theta_start, stderr, walkers, settings.ball,
                                    np.random.default_rng(settings.seed))
     backend = emcee.backends.HDFBackend(str(chain_path))
@@ -458,4 +466,4 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
                + progress.evaluations * per_eval)
     return SampleResult(tuple(names), sizes, vector.units, vector.labels(), chain, log_prob, progress,
                         burn, start, noise, reduced_chi2, renders, time.perf_counter() - t0,
-                        settings, rhat, predictive, truth, posterior)
+                        settings, rhat, predictive, truth, posterior, mode)
