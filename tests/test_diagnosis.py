@@ -152,7 +152,8 @@ def test_null_capture_gives_an_empty_verdict(diagnosis_scene, tmp_path):
 
 
 @pytest.mark.slow
-def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_scene, tmp_path):
+def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_scene, tmp_path,
+                                                                    monkeypatch):
     """Roughness changes images only to second order at 0, so the score test is blind to it; the
     short fit from a probe value must score rough glass far above smooth glass."""
     from abs.diagnosis.score import score_candidates
@@ -163,13 +164,37 @@ def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_sc
     compiled = compile_scene(scene)
     (candidate,) = effects()["surface_roughness"].candidates(scene, compiled)
     extended = extend_scene(scene, (candidate,), {}, tmp_path / "extended.toml")
-    statistics = {}
+    statistics, saved = {}, {}
     for label, truth in (("rough", {"glass.roughness": [0.15]}), ("smooth", {})):
         capture = _capture(diagnosis_scene, tmp_path / label, truth)
-        (score,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings)
+        (score,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings,
+                                    saved=saved)
         assert score.method == "short fit"
         statistics[label] = score.predicted_bic_gain
     assert statistics["rough"] > 0 > statistics["smooth"], statistics
+
+    # Saved short fits (what a resumed diagnosis keeps) are reused, one per capture, not redone.
+    assert len(saved) == 2
+    def no_render(*args):
+        raise AssertionError("a saved short fit was rendered again")
+
+    monkeypatch.setattr("abs.diagnosis.score._short_fit", no_render)
+    (again,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings,
+                                saved=json.loads(json.dumps(saved)))  # through JSON, as on disk
+    assert again.predicted_bic_gain == statistics["smooth"] and set(again.start) == set(score.start)
+
+
+def test_saved_short_fits_survive_a_restart_only_when_resuming(tmp_path):
+    from abs.diagnosis.diagnose import _SavedShortFits
+    from abs.errors import InputError
+
+    path = tmp_path / "short_fits.json"
+    _SavedShortFits(path, resume=False)["k"] = {"statistic": 1.5, "start": {"a.b": [0.1]}}
+    assert _SavedShortFits(path, resume=True) == {"k": {"statistic": 1.5, "start": {"a.b": [0.1]}}}
+    assert _SavedShortFits(path, resume=False) == {}
+    path.write_text("{broken")
+    with pytest.raises(InputError, match="short_fits.json"):
+        _SavedShortFits(path, resume=True)
 
 
 def test_a_short_fit_candidate_is_fitted_even_behind_stronger_score_test_candidates():

@@ -21,6 +21,7 @@ contract, see ``docs/diagnosis.md``). Storage, progress and the report are the c
 
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -36,6 +37,7 @@ from abs.diagnosis.score import CandidateScore, score_candidates
 from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model
 from abs.errors import InputError
 from abs.fitting import FitSettings
+from abs.io.fit_files import write_json
 
 __all__ = ["diagnose", "Diagnosis", "Finding", "Round", "DEFAULT_SETTINGS"]
 
@@ -155,6 +157,24 @@ def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
     return sorted(chosen, key=lambda s: -s.predicted_bic_gain)
 
 
+class _SavedShortFits(dict):
+    """Short-fit results (:func:`~abs.diagnosis.score.score_candidates`), written to ``path``
+    whenever one is added, so a resumed diagnosis reuses them like its checkpointed fits."""
+
+    def __init__(self, path: Path, resume: bool):
+        super().__init__()
+        self.path = path
+        if resume and path.exists():
+            try:
+                self.update(json.loads(path.read_text()))
+            except (json.JSONDecodeError, TypeError, ValueError) as exc:
+                raise InputError(path, "", f"not readable ({exc}); delete it to start over") from None
+
+    def __setitem__(self, key: str, value: dict) -> None:
+        super().__setitem__(key, value)
+        write_json(self.path, dict(self))
+
+
 def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effects: int = 2,
              top_k: int = 2, only: list[str] | None = None, work_dir: str | Path | None = None,
              on_step: Callable[[str], None] | None = None, resume: bool = False) -> Diagnosis:
@@ -185,8 +205,9 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         Continue an interrupted diagnosis in the same ``work_dir``: every model fit is
         checkpointed there after each iteration, and a fit that finished (or was interrupted)
         before is continued from its checkpoint rather than started again
-        (:func:`~abs.diagnosis.select.fit_model`); scores are recomputed. Renders are seeded, so
-        a resumed diagnosis reaches the same verdict.
+        (:func:`~abs.diagnosis.select.fit_model`); short fits are kept in ``short_fits.json``
+        and reused, score tests (one Jacobian each) are recomputed. Renders are seeded, so a
+        resumed diagnosis reaches the same verdict.
     """
     from abs.fitting.fit import prepare
     from abs.render import Camera
@@ -210,6 +231,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         work_dir = tmp.name
     work = Path(work_dir)
 
+    short_fits = _SavedShortFits(work / "short_fits.json", resume)
     step("baseline fit")
     baseline = fit_model(scene, capture, (), {}, settings, work / "baseline.toml", resume)
     step("locating the residual")
@@ -230,7 +252,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                                 work / f"round{r + 1}_scores.toml")
         scores = score_candidates(extended, capture, current.result.vector.names, remaining,
                                   settings, any(effect(c.effect).full_resolution
-                                                for c in current.candidates))
+                                                for c in current.candidates), short_fits)
         scores.sort(key=lambda s: -s.predicted_bic_gain)
         round_ = Round(scores)
         rounds.append(round_)

@@ -24,7 +24,11 @@ from the null to the best amount (chi-square scale, like the score statistic).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import hashlib
+import json
+from collections.abc import MutableMapping
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -106,7 +110,8 @@ def _inside(vector: ParameterVector, theta: np.ndarray, candidate: slice) -> np.
 
 
 def score_candidates(scene, capture, base_parameters, candidates: list[Candidate],
-                     settings: FitSettings, full_resolution: bool = False) -> list[CandidateScore]:
+                     settings: FitSettings, full_resolution: bool = False,
+                     saved: MutableMapping[str, dict] | None = None) -> list[CandidateScore]:
     """Score candidates against the current model, sharing one Jacobian among them.
 
     Parameters
@@ -124,14 +129,29 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
     full_resolution : bool
         The current model holds an effect that needs full resolution (an accepted pose): every
         candidate is then scored without downsampling.
+    saved : mutable mapping, optional
+        Short-fit results by a key of everything they depend on (scene file, capture, candidate,
+        settings): found ones are reused, new ones added. The diagnosis passes a file-backed
+        mapping, so a resumed run does not repeat them.
     """
     scores = {}
     groups: dict[int, list[Candidate]] = {}
     for c in candidates:
         e = effect(c.effect)
         if e.zero_null_derivative:
-            scores[c] = _short_fit(scene, capture, c, replace(settings, downsample=1)
-                                   if e.full_resolution or full_resolution else settings)
+            used = (replace(settings, downsample=1) if e.full_resolution or full_resolution
+                    else settings)
+            key = _short_fit_key(scene, capture, c, used) if saved is not None else None
+            if key is not None and key in saved:
+                scores[c] = _restored(c, saved[key])
+                continue
+            scores[c] = _short_fit(scene, capture, c, used)
+            if key is not None:
+                s = scores[c]
+                saved[key] = {"statistic": float(s.statistic), "dof": s.dof,
+                              "n_residuals": s.n_residuals,
+                              "start": {n: np.asarray(v, float).ravel().tolist()
+                                        for n, v in s.start.items()}}
         else:
             factor = 1 if e.full_resolution or full_resolution else settings.downsample
             groups.setdefault(factor, []).append(c)
@@ -162,6 +182,25 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
             scores[c] = CandidateScore(c, max(statistic, 0.0), own.size, m, "score test",
                                        sub.split(start))
     return [scores[c] for c in candidates]
+
+
+def _short_fit_key(scene, capture, candidate: Candidate, settings: FitSettings) -> str | None:
+    """A digest of what a short fit's result depends on (``None``: the scene has no file)."""
+    source = getattr(scene, "source", None)
+    if source is None or not Path(source).is_file():
+        return None
+    folder = capture.folder if hasattr(capture, "folder") else Path(capture)
+    what = {"scene": hashlib.sha256(Path(source).read_bytes()).hexdigest(),
+            "capture": str(Path(folder).resolve()),
+            "candidate": [candidate.effect, candidate.target, list(candidate.parameters)],
+            "settings": asdict(settings)}
+    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:24]
+
+
+def _restored(candidate: Candidate, entry: dict) -> CandidateScore:
+    return CandidateScore(candidate, float(entry["statistic"]), int(entry["dof"]),
+                          int(entry["n_residuals"]), "short fit",
+                          {n: np.asarray(v, float) for n, v in entry["start"].items()})
 
 
 def _short_fit(scene, capture, candidate, settings) -> CandidateScore:
