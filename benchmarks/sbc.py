@@ -55,6 +55,7 @@ def one_dataset(index: int, args) -> dict:
     rank = (flat < truth).mean(axis=0)
     summary = result.summary()
     return {"index": index, "truth": truth.tolist(), "fit": entry["value"], "fit_stderr": entry["stderr"],
+            "mode": summary["parameters"][PARAMETER]["mode"],
             "mean": flat.mean(axis=0).tolist(), "sd": flat.std(axis=0).tolist(), "rank": rank.tolist(),
             "in50": ((rank > 0.25) & (rank < 0.75)).tolist(), "in90": ((rank > 0.05) & (rank < 0.95)).tolist(),
             "tau": summary["tau"], "acceptance_fraction": summary["acceptance_fraction"],
