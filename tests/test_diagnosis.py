@@ -175,6 +175,7 @@ def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_sc
 
     # Saved short fits (what a resumed diagnosis keeps) are reused, one per capture, not redone.
     assert len(saved) == 2
+
     def no_render(*args):
         raise AssertionError("a saved short fit was rendered again")
 
