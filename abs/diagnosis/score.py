@@ -27,13 +27,13 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import MutableMapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.diagnosis.model import render_problem
+from abs.diagnosis.model import fit_identity, render_problem
 from abs.fitting.parameters import ParameterVector
 from abs.fitting.settings import FitSettings
 
@@ -189,12 +189,9 @@ def _short_fit_key(scene, capture, candidate: Candidate, settings: FitSettings) 
     source = getattr(scene, "source", None)
     if source is None or not Path(source).is_file():
         return None
-    folder = capture.folder if hasattr(capture, "folder") else Path(capture)
-    what = {"scene": hashlib.sha256(Path(source).read_bytes()).hexdigest(),
-            "capture": str(Path(folder).resolve()),
-            "candidate": [candidate.effect, candidate.target, list(candidate.parameters)],
-            "settings": asdict(settings)}
-    return hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:24]
+    what = {**fit_identity(scene, capture, candidate.parameters, {}, settings),
+            "candidate": [candidate.effect, candidate.target]}
+    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:24]
 
 
 def _restored(candidate: Candidate, entry: dict) -> CandidateScore:

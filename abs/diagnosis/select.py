@@ -21,15 +21,13 @@ for a discovery.
 
 from __future__ import annotations
 
-import hashlib
-import json
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.diagnosis.model import extend_scene, render_problem
+from abs.diagnosis.model import extend_scene, fit_identity, render_problem
 from abs.errors import InputError
 from abs.fitting import FitResult, FitSettings, OptimizerState, fit
 from abs.fitting.fit import render_views
@@ -102,20 +100,11 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
         settings = replace(settings, downsample=1)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
-    identity = _fit_identity(extended, capture, names, initial, settings)
+    identity = fit_identity(extended, capture, names, initial, settings)
     state = _saved_state(folder, identity) if resume else None
     result = fit(extended, capture, names, settings, initial=initial, resume=state,
                  on_iteration=lambda s: save_checkpoint(folder, identity, s.to_dict()))
     return ModelFit(tuple(candidates), extended, result, held)
-
-
-def _fit_identity(extended, capture, names, initial: dict, settings: FitSettings) -> dict:
-    """What makes two model fits the same fit (for checkpoints)."""
-    folder = capture.folder if hasattr(capture, "folder") else Path(capture)
-    text = Path(extended.source).read_bytes()
-    return {"scene": hashlib.sha256(text).hexdigest(), "capture": str(Path(folder).resolve()),
-            "parameters": list(names), "initial": {n: np.asarray(v).tolist() for n, v in initial.items()},
-            "settings": json.loads(json.dumps(asdict(settings)))}
 
 
 def _saved_state(folder: Path, identity: dict) -> OptimizerState | None:
