@@ -90,17 +90,22 @@ class NoiseModel:
         posterior mode over independent seed pairs is what the likelihood allows for
         (:mod:`abs.sampling.calibration`; heavy-tailed Monte-Carlo noise through glass moves the
         mode further than its per-pixel variance predicts).
+    render_pairs : int
+        Independent seed pairs the likelihood's residuals average (1, or ``K + 1`` once
+        recentred on ``K`` further pairs by :mod:`abs.sampling.calibration`).
     """
 
     photo_variance: np.ndarray
     render_variance: list[np.ndarray]
     immerkaer_sd: np.ndarray | None = None
     render_scale: float = 1.0
+    render_pairs: int = 1
 
     def residual_variance(self, masks: list[np.ndarray]) -> np.ndarray:
         """Variance of each residual (the order of ``FitProblem.residuals``) of the likelihood's
-        rendering, the average of two independent renders."""
-        parts = [(p + self.render_scale * v / 2)[m].ravel()
+        rendering: the average of ``render_pairs`` pairs of independent renders."""
+        share = self.render_scale / (2 * self.render_pairs)
+        parts = [(p + share * v)[m].ravel()
                  for p, v, m in zip(self.photo_variance, self.render_variance, masks)]
         return np.concatenate(parts)
 
@@ -111,7 +116,7 @@ class NoiseModel:
     def to_dict(self) -> dict:
         out = {"photo_sd": np.sqrt(self.photo_variance).tolist(),
                "render_sd_median": [float(np.sqrt(np.median(v))) for v in self.render_variance],
-               "render_scale": float(self.render_scale)}
+               "render_scale": float(self.render_scale), "render_pairs": int(self.render_pairs)}
         if self.immerkaer_sd is not None:
             out["photo_sd_immerkaer"] = np.asarray(self.immerkaer_sd).tolist()
         return out

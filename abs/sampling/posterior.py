@@ -121,10 +121,11 @@ class RenderPosterior:
     clamp : float or None
     variant : str or None
         Mitsuba variant for worker processes.
-    offset : ndarray, shape (M,), optional
-        Added to both renders' residuals: the mean residual of further seed pairs minus this
-        pair's, at the mode, times ``K / (K + 1)`` (:mod:`abs.sampling.calibration`), so that the
-        residuals stand for the average of all ``K + 1`` pairs near the mode.
+    offset : ndarray, shape (2, M), optional
+        One fixed offset per render, added to its residuals: the mean residual of further seed
+        pairs minus that render's, at the mode, times ``K / (K + 1)``
+        (:mod:`abs.sampling.calibration`), so that the residuals stand for the average of all
+        ``K + 1`` pairs near the mode.
     """
 
     scene: object
@@ -170,8 +171,9 @@ class RenderPosterior:
     def residuals(self, theta: np.ndarray) -> list[np.ndarray]:
         """Residuals of the two fixed-seed renders at physical ``theta`` (plus ``offset``)."""
         problem = self.problem()
-        shift = 0.0 if self.offset is None else self.offset
-        return [problem.residuals(theta, self.spp, seed)[0] + shift for seed in self.seeds]
+        shifts = (0.0, 0.0) if self.offset is None else self.offset
+        return [problem.residuals(theta, self.spp, seed)[0] + shift
+                for seed, shift in zip(self.seeds, shifts)]
 
     def __call__(self, theta: np.ndarray) -> float:
         return ResidualPosterior(self.residuals, self.variance, self.prior)(theta)

@@ -241,6 +241,7 @@ def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
         g["photo_variance"] = noise.photo_variance
         g["mode"] = mode
         g.attrs["render_scale"] = float(noise.render_scale)
+        g.attrs["render_pairs"] = int(noise.render_pairs)
         if offset is not None:
             g["residual_offset"] = offset
         for k, v in enumerate(noise.render_variance):
@@ -257,8 +258,13 @@ def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray
             n = len(g["photo_variance"])
             noise = NoiseModel(np.asarray(g["photo_variance"]),
                                [np.asarray(g[f"render_variance_{k}"]) for k in range(n)],
-                               render_scale=float(g.attrs.get("render_scale", 1.0)))
+                               render_scale=float(g.attrs.get("render_scale", 1.0)),
+                               render_pairs=int(g.attrs.get("render_pairs", 1)))
             offset = np.asarray(g["residual_offset"]) if "residual_offset" in g else None
+            if offset is not None and offset.ndim == 1:
+                # Older chain files kept one offset for both renders: continue them with the
+                # likelihood they were sampled with.
+                offset = np.stack([offset, offset])
             mode = np.asarray(g["mode"]) if "mode" in g else None
     except (OSError, KeyError, json.JSONDecodeError) as exc:
         raise InputError(path, _GROUP, f"not an abs chain file ({exc}); delete it to start over") from None
@@ -423,7 +429,8 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
             stage(f"render-noise calibration ({settings.calibration_pairs} seed pairs)")
             found = calibrate_render_noise(posterior, theta_start, noise.render_part(masks),
                                            settings.calibration_pairs, settings.seed + 700)
-            noise = replace(noise, render_scale=found.scale)
+            noise = replace(noise, render_scale=found.scale,
+                            render_pairs=settings.calibration_pairs + 1)
             offset = found.offset
             posterior = posterior_with(noise, offset)
             theta_start, mode_sd = find_mode(posterior, theta_start, vector.lower, vector.upper,
