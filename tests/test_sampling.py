@@ -158,18 +158,16 @@ def test_seed_pair_calibration_measures_and_recentres(true_ratio):
                                atol=1e-12)
 
 
-class _ScaleRenderPosterior:
+class _ScaleRenderPosterior(_LinearRenderPosterior):
     """A stand-in whose render noise grows with the parameter, as an environment scale's or a
     clear glass's does: ``r_s = theta (a + e_s) - y``, and the Jacobian ``a + e_s`` carries the
     same render's noise (a bright path raises a pixel and its derivative alike)."""
 
-    spp, seeds, prior = 1, (1, 2), _wide_prior(1)
+    prior = _wide_prior(1)
 
     def __init__(self, a, y, noise, variance, offset=None):
-        self.a, self.y, self.noise, self.variance, self.offset = a, y, noise, variance, offset
-
-    def problem(self):
-        return self
+        super().__init__(a[:, None], y, noise, variance)
+        self.a, self.offset = a, offset
 
     def jacobian(self, theta, spp, seed):
         return (self.a + self.noise(seed))[:, None]
@@ -179,9 +177,6 @@ class _ScaleRenderPosterior:
             return theta[0] * (self.a + self.noise(seed)) - self.y, None
         shifts = (0.0, 0.0) if self.offset is None else self.offset
         return [theta[0] * (self.a + self.noise(s)) - self.y + o for s, o in zip(self.seeds, shifts)]
-
-    def __call__(self, theta):
-        return ResidualPosterior(self.residuals, self.variance, self.prior)(theta)
 
 
 def test_recentring_leaves_the_mode_unbiased_when_noise_grows_with_the_parameter():
