@@ -44,9 +44,6 @@ __all__ = ["CandidateScore", "score_candidates"]
 SHORT_FIT_SPP_FACTOR = 16
 #: Amounts (times the effect's probe value) at which an effect invisible to the score test is tried.
 PROBE_SCALES = (0.25, 0.5, 1.0, 2.0, 4.0)
-#: The score test renders with this many times the fits' samples per pixel: its power grows with
-#: the samples (S scales as 1 / sigma^2) and it costs one Jacobian, so it can afford them.
-SCORE_SPP_FACTOR = 4
 
 
 @dataclass(frozen=True)
@@ -158,7 +155,10 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
     for factor, group in groups.items():
         names = tuple(base_parameters) + tuple(p for c in group for p in c.parameters)
         compiled, vector, theta0, problem = render_problem(scene, capture, names, False, factor, settings.clamp)
-        r, J = problem.residuals(theta0, SCORE_SPP_FACTOR * settings.spp, settings.seed + 501,
+        # The test's power grows with the samples (S scales as 1 / sigma^2, mostly render
+        # noise) and it costs one Jacobian, so it affords more than a fit's iteration.
+        spp = max(effect(c.effect).score_spp_factor for c in group) * settings.spp
+        r, J = problem.residuals(theta0, spp, settings.seed + 501,
                                  jacobian=True,
                                  jacobian_seed=settings.seed + 502)
         slices = vector.slices()

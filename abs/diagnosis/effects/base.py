@@ -54,11 +54,16 @@ class Effect(ABC):
         test cannot see the effect; it is scored by a short fit instead.
     full_resolution : bool
         Its derivatives need renders at full resolution (pose: silhouette edge sampling).
+    score_spp_factor : int
+        The score test renders its residual and Jacobian at this many times the fits' samples
+        per pixel (candidates scored together use the largest of theirs). The test's power grows
+        with the samples: its noise is mostly the renders'.
     """
 
     name: ClassVar[str]
     zero_null_derivative: ClassVar[bool] = False
     full_resolution: ClassVar[bool] = False
+    score_spp_factor: ClassVar[int] = 4
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:
