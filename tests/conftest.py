@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,14 @@ from abs.render.variant import set_variant
 set_variant()
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+DIAGNOSIS_SUITE = Path(__file__).resolve().parents[1] / "benchmarks" / "diagnosis"
+
+
+def use_diagnosis_suite() -> None:
+    """Make the diagnosis proof suite's scripts (``cases``, ``run``) importable: tests reuse its
+    scenes and cases, and ``run.py`` imports ``cases`` by name from its own folder."""
+    if str(DIAGNOSIS_SUITE) not in sys.path:
+        sys.path.insert(0, str(DIAGNOSIS_SUITE))
 
 
 def write_mesh(path: Path, mesh) -> None:

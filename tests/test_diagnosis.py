@@ -224,14 +224,13 @@ def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
     48x36: the pose score (chi-square with 6 degrees of freedom when the box is in place) must
     predict a BIC gain for the moved box and none for the box in place. Silhouette derivatives
     come from edge samples; at too few samples both scores drown in render noise."""
-    import sys
-    from pathlib import Path
+    from conftest import use_diagnosis_suite
 
     from abs.diagnosis.score import score_candidates
     from abs.fitting import FitSettings
     from abs.simulate import simulate_capture
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "diagnosis"))
+    use_diagnosis_suite()
     from cases import build_scene
 
     scene_path = build_scene(tmp_path / "box", "box")

@@ -9,13 +9,12 @@ effect the catalogue lost, or a truth value no candidate carries, would otherwis
 from __future__ import annotations
 
 import inspect
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import use_diagnosis_suite
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks" / "diagnosis"))
+use_diagnosis_suite()
 
 from cases import CASES, QUICK, TRUTH_RENDERERS, build_scene  # noqa: E402
 from run import _truth_scene  # noqa: E402
