@@ -5,7 +5,9 @@ seeds) and each n in 1, 2, 5, 10, 20, 50, 100, draws n random direction pairs (�
 solid angle on the hemisphere with θ <= 80°), reads the true BRDF at the nearest table entries
 (R, G, B; optionally with relative noise), reconstructs the full table with
 :func:`abs.brdf.reconstruct.fit_coefficients` (η from :func:`default_eta`, and a few multiples of
-it for comparison) and scores it against the true table. Errors are averaged over pairs of
+it for comparison) and scores it against the true table; and the same for the first n of 100
+direction pairs planned by :func:`abs.brdf.design.plan_directions` (chosen once, from the basis
+alone, among ``--candidates`` random pairs). Errors are averaged over pairs of
 directions (the measure of :func:`abs.brdf.directions.merl_entry_measure`, estimated on a fixed
 random subset of entries drawn in proportion to it), not over table entries, a third of which lie
 within 10° of the specular direction:
@@ -35,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from abs.brdf.basis import BRDFBasis
-from abs.brdf.directions import merl_entries, merl_entry_measure
+from abs.brdf.design import plan_directions
+from abs.brdf.directions import merl_entries, merl_entry_measure, uniform_hemisphere_directions
 from abs.brdf.measured import STUDY_MATERIALS, measured_material_names, measured_table
 from abs.brdf.pca import build_basis
 from abs.brdf.reconstruct import default_eta, fit_coefficients, project_table
@@ -55,12 +58,12 @@ def default_basis(components: int = 32) -> Path:
     return path
 
 
-def random_directions(rng: np.random.Generator, count: int) -> np.ndarray:
-    """(count, 3) directions uniform in solid angle on the hemisphere, θ <= MAX_THETA."""
-    cos_theta = rng.uniform(np.cos(MAX_THETA), 1.0, count)
-    phi = rng.uniform(0.0, 2 * np.pi, count)
-    sin_theta = np.sqrt(1 - cos_theta**2)
-    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=-1)
+def quartiles(scores: list[dict[str, float]]) -> dict[str, dict[str, float]]:
+    """Median and quartiles of each metric over draws."""
+    return {metric: {"median": float(np.median([d[metric] for d in scores])),
+                     "q25": float(np.quantile([d[metric] for d in scores], 0.25)),
+                     "q75": float(np.quantile([d[metric] for d in scores], 0.75))}
+            for metric in scores[0]}
 
 
 class Scorer:
@@ -96,6 +99,8 @@ def main() -> None:
     p.add_argument("--materials", default=",".join(STUDY_MATERIALS), help="held-out materials")
     p.add_argument("--draws", type=int, default=10, help="random direction sets per n")
     p.add_argument("--noise", type=float, default=0.0, help="relative noise of the observed values")
+    p.add_argument("--candidates", type=int, default=20_000,
+                   help="random candidate pairs the planned directions are chosen from")
     p.add_argument("--subset", type=int, default=200_000, help="table entries scored (per subset)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks/results/brdf_reconstruction.json")
@@ -110,6 +115,8 @@ def main() -> None:
         raise SystemExit(f"not held out (in the basis' training set): {sorted(trained & set(materials))}")
     eta = default_eta(basis, args.noise)
     rng = np.random.default_rng(args.seed)
+    plan = plan_directions(basis, max(N_OBSERVATIONS), candidates=args.candidates, eta=eta,
+                           max_theta_deg=float(np.degrees(MAX_THETA)), rng=args.seed + 1)
     measure = merl_entry_measure()
     pairs = np.sort(rng.choice(measure.size, args.subset, p=measure / measure.sum()))
     entries = np.sort(rng.choice(np.flatnonzero(measure > 0), args.subset, replace=False))
@@ -123,28 +130,32 @@ def main() -> None:
         for n in N_OBSERVATIONS:
             draws = {f: [] for f in ETA_FACTORS}
             for _ in range(args.draws):
-                wi, wo = random_directions(rng, n), random_directions(rng, n)
+                wi = uniform_hemisphere_directions(rng, n, MAX_THETA)
+                wo = uniform_hemisphere_directions(rng, n, MAX_THETA)
                 entries = merl_entries(wi, wo).reshape(-1)
                 values = truth[entries] * (1 + args.noise * rng.normal(size=entries.size))
                 for factor in ETA_FACTORS:
                     c = fit_coefficients(basis, entries, values, eta=factor * eta)
                     draws[factor].append(score(c))
-            row["n"][n] = {
-                f"eta_x{factor:g}": {metric: {"median": float(np.median([d[metric] for d in ds])),
-                                              "q25": float(np.quantile([d[metric] for d in ds], 0.25)),
-                                              "q75": float(np.quantile([d[metric] for d in ds], 0.75))}
-                                     for metric in ds[0]}
-                for factor, ds in draws.items()
-            }
+            # The planned pairs (the same for every material; only the noise is drawn again).
+            entries = merl_entries(plan.wi[:n], plan.wo[:n]).reshape(-1)
+            planned = [score(fit_coefficients(basis, entries, truth[entries] * (
+                1 + args.noise * rng.normal(size=entries.size)), eta=eta))
+                for _ in range(args.draws if args.noise > 0 else 1)]
+            row["n"][n] = {f"eta_x{factor:g}": quartiles(ds) for factor, ds in draws.items()}
+            row["n"][n]["planned"] = quartiles(planned)
         results[name] = row
         print(f"\n{name}: mapped RMSE (median of {args.draws} draws), default eta = {eta:.3g}")
         print(f"  mean table {row['mean_table']['mapped_rmse']:.3f}   best in basis "
               f"{row['best_in_basis']['mapped_rmse']:.3f}   (relative cos-weighted: "
               f"{row['mean_table']['relative_cosine_rmse']:.3f}, {row['best_in_basis']['relative_cosine_rmse']:.3f})")
-        print("  n    " + "  ".join(f"eta x{f:<5g}" for f in ETA_FACTORS) + "  rel.cos (default eta)")
+        print("  n    " + "  ".join(f"eta x{f:<5g}" for f in ETA_FACTORS)
+              + "    planned  rel.cos (default eta)  rel.cos planned")
         for n, by_eta in row["n"].items():
             cells = "  ".join(f"{by_eta[f'eta_x{f:g}']['mapped_rmse']['median']:9.3f}" for f in ETA_FACTORS)
-            print(f"  {n:<4d} {cells}  {by_eta['eta_x1']['relative_cosine_rmse']['median']:9.3f}")
+            print(f"  {n:<4d} {cells}  {by_eta['planned']['mapped_rmse']['median']:9.3f}  "
+                  f"{by_eta['eta_x1']['relative_cosine_rmse']['median']:9.3f}  "
+                  f"{by_eta['planned']['relative_cosine_rmse']['median']:9.3f}")
 
     summary = {
         "basis": {"file": str(basis_path), "components": basis.n_components,
@@ -152,7 +163,9 @@ def main() -> None:
                   "residual_variance": basis.residual_variance},
         "protocol": {"n_observations": list(N_OBSERVATIONS), "draws": args.draws, "noise": args.noise,
                      "max_theta_deg": float(np.degrees(MAX_THETA)), "scored_entries": args.subset,
-                     "eta_factors": list(ETA_FACTORS), "seed": args.seed},
+                     "eta_factors": list(ETA_FACTORS), "seed": args.seed,
+                     "planned": {"candidates": args.candidates,
+                                 "expected_mapped_rmse": plan.expected_rmse.tolist()}},
         "materials": results,
         "wall_s": time.perf_counter() - start,
         "machine": platform.platform(),
@@ -178,11 +191,14 @@ def plot(summary: dict, path: Path) -> None:
             colour = f"C{i}"
             stats = [row["n"][str(k) if str(k) in row["n"] else k]["eta_x1"][metric] for k in n]
             ax.plot(n, [s["median"] for s in stats], "o-", color=colour, label=name)
+            planned = [row["n"][str(k) if str(k) in row["n"] else k]["planned"][metric]["median"] for k in n]
+            ax.plot(n, planned, "s-.", color=colour, mfc="none")
             ax.fill_between(n, [s["q25"] for s in stats], [s["q75"] for s in stats], color=colour, alpha=0.2)
             ax.axhline(row["mean_table"][metric], color=colour, ls="--", lw=0.8)
             ax.axhline(row["best_in_basis"][metric], color=colour, ls=":", lw=0.8)
         ax.set(xscale="log", yscale="log", xlabel="observed direction pairs n", ylabel=label)
-    axes[0].legend(fontsize=8, title="median, IQR; -- mean table, : best in basis", title_fontsize=7)
+    axes[0].legend(fontsize=8, title="random: median, IQR; -. planned;\n-- mean table, : best in basis",
+                   title_fontsize=7)
     ax = axes[2]
     for j, factor in enumerate(summary["protocol"]["eta_factors"]):
         med = [np.mean([row["n"][str(k) if str(k) in row["n"] else k][f"eta_x{factor:g}"]["mapped_rmse"]["median"]

@@ -198,3 +198,22 @@ def glass_scene_dir(tmp_path_factory, small_scene_dir) -> Path:
     return _single_sphere_scene(
         tmp_path_factory.mktemp("glass_scene"), small_scene_dir,
         'glass', 'type = "dielectric"\nior = [1.5, 1.5, 1.5]\nabsorption = [2.0, 4.0, 8.0]')
+
+
+def analytic_tables(count: int, seed: int = 2) -> list[np.ndarray]:
+    """Blinn-Phong-like isotropic tables (1/sr) with random colour, gloss and exponent; 0 below the
+    horizon like a MERL table."""
+    from abs.io.merl import merl_sample_angles
+
+    rng = np.random.default_rng(seed)
+    theta_h, theta_d, phi_d = merl_sample_angles()
+    along = np.cos(theta_d) * np.cos(theta_h)
+    across = np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
+    valid = (along + across > 0) & (along - across > 0)
+    tables = []
+    for _ in range(count):
+        diffuse = rng.uniform(0.02, 0.3, 3)[:, None, None, None] / np.pi
+        gloss, exponent = rng.uniform(0.1, 3.0), rng.uniform(5, 200)
+        lobe = gloss * (exponent + 2) / (2 * np.pi) * np.cos(theta_h) ** exponent * (1 + 0.5 * np.sin(theta_d) ** 4)
+        tables.append(((diffuse + lobe) * valid).astype(np.float32))
+    return tables

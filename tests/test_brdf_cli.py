@@ -35,3 +35,26 @@ def test_build_basis_holds_out_materials(tmp_path, capsys):
     assert main(["brdf", "build-basis", "--out", str(out), "--materials", names, "--exclude", "",
                  "--components", "4"]) == 2
     assert "--components: must be in [1, 3]" in capsys.readouterr().err
+
+
+def test_plan_directions_writes_a_plan(tmp_path, capsys):
+    import json
+
+    basis_file = tmp_path / "basis.npz"
+    assert main(["brdf", "build-basis", "--out", str(basis_file), "--materials",
+                 "nylon,red-plastic,white-paint,gold-metallic-paint", "--components", "3"]) == 0
+    plan_file = tmp_path / "plan.json"
+    assert main(["brdf", "plan-directions", str(basis_file), "-n", "4", "--candidates", "500",
+                 "--out", str(plan_file)]) == 0
+    plan = json.loads(plan_file.read_text())
+    assert len(plan["pairs"]) == 4 and plan["eta"] > 0
+    errors = [p["expected_mapped_rmse"] for p in plan["pairs"]]
+    assert errors == sorted(errors, reverse=True)
+    for pair in plan["pairs"]:
+        wi, wo = np.array(pair["wi"]), np.array(pair["wo"])
+        assert abs(np.linalg.norm(wi) - 1) < 1e-5 and wi[2] > 0 and wo[2] > 0
+        assert pair["theta_i_deg"] == pytest.approx(np.degrees(np.arccos(wi[2])), abs=1e-2)
+        assert pair["theta_i_deg"] <= 80.0 and pair["theta_o_deg"] <= 80.0
+    assert main(["brdf", "plan-directions", str(basis_file), "-n", "501", "--candidates", "500",
+                 "--out", str(plan_file)]) == 2
+    assert "-n: n must lie in [1, 500]" in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import analytic_tables
 
 from abs.brdf.basis import BRDFBasis
 from abs.brdf.directions import merl_entries, merl_entry_measure, rusinkiewicz_angles
@@ -61,23 +62,6 @@ def test_loo_residuals_match_refitting():
 
 
 # -- full-size bases from analytic tables ----------------------------------------------------------
-def analytic_tables(count: int, seed: int = 2) -> list[np.ndarray]:
-    """Blinn-Phong-like isotropic tables (1/sr) with random colour, gloss and exponent; 0 below the
-    horizon like a MERL table."""
-    rng = np.random.default_rng(seed)
-    theta_h, theta_d, phi_d = merl_sample_angles()
-    along = np.cos(theta_d) * np.cos(theta_h)
-    across = np.sin(theta_d) * np.cos(phi_d) * np.sin(theta_h)
-    valid = (along + across > 0) & (along - across > 0)
-    tables = []
-    for _ in range(count):
-        diffuse = rng.uniform(0.02, 0.3, 3)[:, None, None, None] / np.pi
-        gloss, exponent = rng.uniform(0.1, 3.0), rng.uniform(5, 200)
-        lobe = gloss * (exponent + 2) / (2 * np.pi) * np.cos(theta_h) ** exponent * (1 + 0.5 * np.sin(theta_d) ** 4)
-        tables.append(((diffuse + lobe) * valid).astype(np.float32))
-    return tables
-
-
 @pytest.fixture(scope="module")
 def small_basis():
     tables = analytic_tables(5)

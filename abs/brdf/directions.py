@@ -13,13 +13,23 @@ import numpy as np
 
 from abs.io.merl import MERL_SHAPE, merl_sample_angles
 
-__all__ = ["rusinkiewicz_angles", "merl_entries", "merl_entry_measure"]
+__all__ = ["rusinkiewicz_angles", "merl_entries", "merl_entry_measure", "uniform_hemisphere_directions"]
 
 _CHANNEL_SIZE = MERL_SHAPE[1] * MERL_SHAPE[2] * MERL_SHAPE[3]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def uniform_hemisphere_directions(rng: np.random.Generator, count: int,
+                                  max_theta: float = np.pi / 2) -> np.ndarray:
+    """(count, 3) unit directions uniform in solid angle on the hemisphere z > 0, polar angle at
+    most ``max_theta`` (radians)."""
+    cos_theta = rng.uniform(np.cos(max_theta), 1.0, count)
+    phi = rng.uniform(0.0, 2 * np.pi, count)
+    sin_theta = np.sqrt(1 - cos_theta**2)
+    return np.stack([sin_theta * np.cos(phi), sin_theta * np.sin(phi), cos_theta], axis=-1)
 
 
 def rusinkiewicz_angles(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -36,6 +36,20 @@ def add_parser(sub) -> None:
     build.add_argument("--merl-dir", type=Path, help=merl_help)
     build.set_defaults(run=run_build)
 
+    plan = commands.add_parser("plan-directions",
+                               help="direction pairs to measure for a reconstruction from n observations")
+    plan.add_argument("basis", type=Path, help="basis file (.npz) built without the materials to measure")
+    plan.add_argument("-n", type=int, required=True, help="number of direction pairs")
+    plan.add_argument("--out", type=Path, required=True, help="plan to write (.json)")
+    plan.add_argument("--candidates", type=int, default=20_000,
+                      help="random candidate pairs to choose from (default %(default)s)")
+    plan.add_argument("--max-theta", type=float, default=80.0,
+                      help="largest polar angle of a direction, degrees (default %(default)s)")
+    plan.add_argument("--noise", type=float, default=0.0,
+                      help="relative noise of the measured values (sets η; default %(default)s)")
+    plan.add_argument("--seed", type=int, default=0, help="seed of the random candidates")
+    plan.set_defaults(run=run_plan)
+
 
 def _names(text: str | None) -> list[str]:
     return [n.strip() for n in (text or "").split(",") if n.strip()]
@@ -98,4 +112,51 @@ def run_build(args) -> int:
     kept = float((sv[: args.components] ** 2).sum() / (sv**2).sum())
     print(f"wrote {args.out}: {args.components} components from {len(training)} materials "
           f"({100 * kept:.1f} % of the mapped variance; held out: {', '.join(exclude) or 'none'})")
+    return 0
+
+
+def run_plan(args) -> int:
+    import json
+
+    import numpy as np
+
+    from abs.brdf.basis import BRDFBasis
+    from abs.brdf.design import plan_directions
+    from abs.brdf.directions import rusinkiewicz_angles
+    from abs.brdf.reconstruct import default_eta
+    from abs.errors import InputError
+
+    basis = BRDFBasis.load(args.basis)
+    if basis.training_coefficients is None or basis.residual_variance is None:
+        raise InputError(args.basis, "training_coefficients",
+                         "this basis has no training-set statistics; rebuild it with `abs brdf build-basis`")
+    if not 0 < args.max_theta <= 90:
+        raise InputError(None, "--max-theta", f"must be in (0, 90] degrees, got {args.max_theta}")
+    eta = default_eta(basis, args.noise)
+    try:
+        plan = plan_directions(basis, args.n, args.candidates, eta, args.max_theta, args.seed)
+    except ValueError as exc:
+        raise InputError(None, "-n", str(exc)) from None
+    theta_h, theta_d, phi_d = (np.degrees(a) for a in rusinkiewicz_angles(plan.wi, plan.wo))
+
+    def polar(w):
+        return np.degrees(np.arccos(np.clip(w[:, 2], -1, 1))), np.degrees(np.arctan2(w[:, 1], w[:, 0]))
+
+    (theta_i, phi_i), (theta_o, phi_o) = polar(plan.wi), polar(plan.wo)
+    pairs = [{"wi": plan.wi[j].round(6).tolist(), "wo": plan.wo[j].round(6).tolist(),
+              "theta_i_deg": round(float(theta_i[j]), 3), "phi_i_deg": round(float(phi_i[j]), 3),
+              "theta_o_deg": round(float(theta_o[j]), 3), "phi_o_deg": round(float(phi_o[j]), 3),
+              "theta_h_deg": round(float(theta_h[j]), 3), "theta_d_deg": round(float(theta_d[j]), 3),
+              "phi_d_deg": round(float(phi_d[j]), 3),
+              "expected_mapped_rmse": round(float(plan.expected_rmse[j]), 5)}
+             for j in range(args.n)]
+    document = {"basis": str(args.basis), "eta": eta, "noise": args.noise, "candidates": args.candidates,
+                "max_theta_deg": args.max_theta, "seed": args.seed,
+                "frame": "local shading frame, z = surface normal; expected_mapped_rmse: after the "
+                         "first k pairs (docs/brdf.md)",
+                "pairs": pairs}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(document, indent=2))
+    print(f"wrote {args.out}: {args.n} direction pairs, expected mapped RMSE "
+          f"{plan.expected_rmse[0]:.3f} after 1, {plan.expected_rmse[-1]:.3f} after {args.n}")
     return 0
