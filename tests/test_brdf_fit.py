@@ -8,9 +8,9 @@ basis' own population prior (training coefficients have sd 1/sqrt(m − 1)).
 
 Measured (spp 32, 2 refinement steps): errors of 0.02 on coefficients of 0.06-0.15, up to six
 Laplace standard errors: the Monte-Carlo bias the refinement does not fully remove
-(docs/fitting.md, "Open problems"), hence the absolute slack below. With K = 4 the fourth
-direction is barely visible in these photographs and the fit ends 0.2 away from the truth
-(reported, not tested).
+(docs/fitting.md, "Open problems"), hence the absolute slack below. With K = 4 the fixed-seed
+bias grows to 0.3 along the specular component and needs about 8 refinement steps (docs/brdf.md;
+reported, not tested: a minute more).
 """
 
 from __future__ import annotations

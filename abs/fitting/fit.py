@@ -279,7 +279,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None,
                           jacobian2=problem.jacobian(theta, settings.spp, settings.seed + 97))
     if state.moments.get("refinement"):
-        points = averaged_refinement_points(state.moments["refinement"])
+        points = averaged_refinement_points(state.moments["refinement"],
+                                            state.moments.get("refinement_clipped"))
         uncertainty = with_monte_carlo_error(uncertainty, np.array([vector.to_physical(p) for p in points]))
 
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)

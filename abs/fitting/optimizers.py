@@ -10,8 +10,9 @@
   the parameters (a brighter scene is noisier), which pulls the minimum towards darker
   renderings. The refinement's fixed point, ``E[J_B^T r_A] = 0``, has no such bias; its
   curvature comes from two independent Jacobians (:func:`cross_curvature`) so the steps are not
-  shortened by the Jacobian noise; its iterates after the first quarter are averaged, and their
-  scatter is the Monte-Carlo part of the standard errors.
+  shortened by the Jacobian noise; its steps grow while they keep pointing the same way (the
+  unbiased solution can be many typical steps away); its iterates that have arrived are averaged,
+  and their scatter is the Monte-Carlo part of the standard errors.
 - :func:`adam`: Adam on stochastic gradients (a new render seed per iteration), with spp and
   resolution schedules; the choice for many scalars. The result is the average of the last
   quarter of the iterates, which cancels most of the Monte-Carlo jitter of the final steps.
@@ -194,25 +195,40 @@ def cross_curvature(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
     return (V * w) @ V.T
 
 
-def averaged_refinement_points(points: list) -> np.ndarray:
+def averaged_refinement_points(points: list, travelling: list | None = None) -> np.ndarray:
     """The refinement points that are averaged: all but the first quarter (at least the first
-    one), which may still be travelling from the biased start; full Newton steps arrive within
-    a step or two, after which the points scatter independently around the unbiased solution."""
+    one), which may still be travelling from the biased start, and none reached by a clipped step
+    (``travelling``, one flag per point); full Newton steps arrive within a step or two, after
+    which the points scatter independently around the unbiased solution. When every step was
+    clipped, the last point alone."""
     points = np.asarray(points, np.float64)
-    return points[max(1, len(points) // 4):] if len(points) > 1 else points
+    if len(points) <= 1:
+        return points
+    start = max(1, len(points) // 4)
+    if travelling is not None and any(travelling):
+        start = max(start, max(i for i, t in enumerate(travelling) if t) + 1)
+    return points[start:] if start < len(points) else points[-1:]
 
 
 def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
                             state: OptimizerState, steps: int, max_step: float = 1.0,
                             on_iteration: Callback | None = None) -> OptimizerState:
     """Gauss-Newton steps on decorrelated renders; returns the mean of the stepped-to points
-    after the first quarter (:func:`averaged_refinement_points`).
+    that have arrived (:func:`averaged_refinement_points`).
 
     Each step solves ``H dz = -g`` with ``g = (J1 + J2)^T r / 2`` and ``H`` the cross curvature
     of two independent Jacobians (:func:`cross_curvature`): with ``r``, ``J1`` and ``J2`` from
     three independent renders both are unbiased, so the step is the full Newton step on the
     expected objective rather than one shortened by the Jacobian noise (which, with ``J1^T J1``,
     took a third of the way per step at 16 spp on an IOR).
+
+    Steps are clipped to a trust radius (largest change of any unconstrained coordinate, in
+    typical steps) that starts at ``max_step``: a noisy Jacobian must not throw the fit far from
+    the Levenberg-Marquardt solution. The radius doubles when a clipped step is followed by one
+    pointing the same way (the solution is further than the radius, not noise: Levenberg-Marquardt's
+    fixed-seed objective can sit many typical steps from it when the renders' Monte-Carlo
+    variance changes with the parameters, as for a BRDF's specular lobe) and halves, down to
+    ``max_step``, when a step turns back.
 
     Parameters
     ----------
@@ -222,10 +238,12 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
     steps : int
         Number of steps (each costs one evaluation).
     max_step : float
-        Largest step in any unconstrained coordinate (typical steps): a noisy Jacobian must not
-        throw the fit far from the Levenberg-Marquardt solution.
+        Initial and smallest trust radius (typical steps).
     """
     points = [np.asarray(p, np.float64) for p in state.moments.get("refinement", [])]
+    travelling = list(state.moments.get("refinement_clipped", [False] * len(points)))
+    radius = float(state.moments.get("refinement_radius", max_step))
+    previous = state.moments.get("refinement_step")
     z = points[-1] if points else np.array(state.z, np.float64)
     while len(points) < steps:
         state.iteration += 1
@@ -233,10 +251,23 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
         state.history.append({"iteration": state.iteration, "loss": float(loss),
                               "z": list(map(float, z)), "phase": "refinement"})
         step = np.linalg.solve(cross_curvature(J1, J2), -0.5 * (J1 + J2).T @ r)
-        z = z + step * min(1.0, max_step / max(float(np.abs(step).max()), 1e-300))
+        if previous is not None:
+            previous = np.asarray(previous, np.float64)
+            agree = float(step @ previous) / max(float(np.linalg.norm(step) * np.linalg.norm(previous)), 1e-300)
+            if travelling and travelling[-1] and agree > 0.5:
+                radius *= 2.0
+            elif agree < 0.0:
+                radius = max(max_step, radius / 2.0)
+        size = float(np.abs(step).max())
+        clipped = size > radius
+        step = step * min(1.0, radius / max(size, 1e-300))
+        z = z + step
         points.append(z)
-        state.moments["refinement"] = [p.tolist() for p in points]
-        state.z = np.mean(averaged_refinement_points(points), axis=0)
+        travelling.append(clipped)
+        previous = step
+        state.moments.update(refinement=[p.tolist() for p in points], refinement_clipped=travelling,
+                             refinement_radius=radius, refinement_step=step.tolist())
+        state.z = np.mean(averaged_refinement_points(points, travelling), axis=0)
         if on_iteration is not None:
             on_iteration(state)
     return state
