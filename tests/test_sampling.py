@@ -255,9 +255,14 @@ def test_an_interrupted_chain_resumes_from_its_file(tmp_path):
         _run(posterior, start, tmp_path, steps=200, on_step=interrupt)
     first = emcee.backends.HDFBackend(str(tmp_path / "chain.h5"), read_only=True).get_chain()
     assert first.shape == (30, 16, 3)
-    backend, progress = _run(posterior, start + 5.0, tmp_path, steps=60)  # start is ignored
+    seen = []
+    backend, progress = _run(posterior, start + 5.0, tmp_path, steps=60,  # start is ignored
+                             on_step=seen.append)
     chain = backend.get_chain()
     assert progress.steps == 60 and chain.shape == (60, 16, 3)
+    # Reports count the file's steps, the first one step after the resumed 30; the budget is
+    # the file's length when the run ends (what a progress bar fills to).
+    assert seen[0].steps == 31 and {p.budget_steps for p in seen} == {60}
     np.testing.assert_array_equal(chain[:30], first)
     # The continuation moves from the saved walkers, not from the (far away) new start.
     assert np.abs(chain[30:] - start).max() < 3.0

@@ -68,6 +68,9 @@ def pair_weighted_gram(basis: BRDFBasis) -> np.ndarray:
 
 def _error_variance(basis: BRDFBasis, eta: float) -> float:
     """s² = η τ² (the per-entry error variance that η stands for)."""
+    if basis.training_coefficients is None:
+        raise ValueError("this basis has no training_coefficients (the prior's variance τ²); "
+                         "build it with abs.brdf.pca.build_basis")
     tau2 = float(np.mean(np.var(basis.training_coefficients.astype(np.float64), axis=0, ddof=1)))
     return eta * tau2
 

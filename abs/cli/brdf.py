@@ -1,4 +1,4 @@
-"""``abs brdf ...``: the measured-BRDF tools (materials, MERL tables, the PCA basis)."""
+"""``abs brdf ...``: the measured-BRDF tools (materials, MERL tables, the PCA basis, measurement plans)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ def add_parser(sub) -> None:
     from abs.brdf.measured import STUDY_MATERIALS
     from abs.brdf.pca import DEFAULT_EPSILON
 
-    p = sub.add_parser("brdf", help="measured BRDFs: list materials, export MERL tables, build the PCA basis")
+    p = sub.add_parser("brdf", help="measured BRDFs: list materials, export MERL tables, build the PCA basis, plan measurement directions")
     commands = p.add_subparsers(dest="brdf_command", required=True)
     merl_help = "folder of real MERL <name>.binary files (default: the neural fits in the shared data)"
 

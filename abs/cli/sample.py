@@ -85,8 +85,15 @@ def run(args) -> int:
         print(f"no chain in {out}; starting a new one")
 
     bar = tqdm(total=settings.max_steps, desc="sample", unit="step")
+    chain = {"first": False}
 
     def on_step(progress) -> None:
+        if chain["first"]:
+            # Rate and time left count the chain's steps only: not the stages before it, nor the
+            # steps of a resumed file (the bar starts one step back from the first report).
+            chain["first"] = False
+            bar.total = progress.budget_steps or bar.total
+            bar.n = bar.last_print_n = bar.initial = progress.steps - 1
         bar.update(progress.steps - bar.n)
         tau = "-" if progress.tau is None else f"{float(progress.tau.max()):.3g}"
         bar.set_postfix(acc=f"{progress.acceptance_fraction:.2f}", tau=tau)
@@ -94,6 +101,9 @@ def run(args) -> int:
     def on_stage(message: str) -> None:
         # The chain's own steps fill the bar; everything around it is named in its description.
         bar.set_description_str(f"sample [{message}]")
+        if message == "chain":
+            bar.reset()
+            chain["first"] = True
 
     with evaluation_pool(args.workers, args.scheduler) as pool:
         result = sample(scene, args.capture, names, settings, out / CHAIN_FILE, start=start,

@@ -44,6 +44,9 @@ class EnsembleProgress:
     converged : bool
     stop_reason : str or None
         ``"converged"``, ``"max_steps"`` or ``"max_evaluations"`` when the run ended.
+    budget_steps : int or None
+        Steps the file will hold when this run's budget (``max_steps`` or ``max_evaluations``)
+        is spent, unless it converges first.
     """
 
     steps: int
@@ -52,6 +55,7 @@ class EnsembleProgress:
     tau: np.ndarray | None
     converged: bool = False
     stop_reason: str | None = None
+    budget_steps: int | None = None
 
 
 def autocorrelation_time(backend: emcee.backends.Backend) -> np.ndarray:
@@ -102,7 +106,7 @@ def run_ensemble(log_prob: Callable[[np.ndarray], float], backend: emcee.backend
     def progress(tau, converged=False, reason=None) -> EnsembleProgress:
         it = int(backend.iteration)
         acc = float(np.mean(backend.accepted) / it) if it else 0.0
-        return EnsembleProgress(it, int(walkers * (it + 1)), acc, tau, converged, reason)
+        return EnsembleProgress(it, int(walkers * (it + 1)), acc, tau, converged, reason, budget_steps)
 
     def budget_left() -> int:
         left = max_steps - backend.iteration
@@ -111,6 +115,7 @@ def run_ensemble(log_prob: Callable[[np.ndarray], float], backend: emcee.backend
         return left
 
     tau_old, tau = None, None
+    budget_steps = int(backend.iteration) + max(budget_left(), 0)
     if budget_left() <= 0:
         return progress(None, False, "max_steps" if backend.iteration >= max_steps else "max_evaluations")
     for _ in sampler.sample(state, iterations=budget_left(), progress=False):
