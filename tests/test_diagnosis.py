@@ -60,9 +60,9 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     extended = extend_scene(scene, tuple(pool), {}, tmp_path / "extended.toml")
     assert set(p for c in pool for p in c.parameters) <= set(extended.fit_parameters)
     image = compile_scene(extended).render(camera, spp=2, seed=5).numpy()
-    # Exact up to float32 round-off: the film's parallel accumulation adds a pixel's samples in
-    # whatever order the threads finish (once in CI: 1 ulp in one pixel of 192). A null value that
-    # changed the model would move many pixels by far more.
+    # Exact up to float32 round-off (once in CI, not reproduced alone: 1 ulp in one pixel of 192,
+    # most likely the order in which parallel threads add samples). A null value that changed
+    # the model would move many pixels by far more.
     np.testing.assert_allclose(image, reference, rtol=1e-6, atol=0)
     assert np.mean(image != reference) < 0.02
 
