@@ -17,7 +17,7 @@ from abs.scene import load_scene
 
 #: Decimals of the fields diagnosis.json rounds (abs/diagnosis: score.py, select.py, localise.py).
 _ROUNDED = {"score": 3, "predicted_bic_gain": 3, "holdout_z": 3, "delta_bic": 3, "objects": 3,
-            "share_of_residual": 4, "mean_residual": 5}
+            "share_of_residual": 4, "mean_residual": 5, "refit_scatter": 7}
 
 
 def _differences(a, b, path="") -> list[str]:

@@ -202,6 +202,10 @@ def compare(reference: ModelFit, extended: ModelFit, refit_scatter: float, captu
     settings : FitSettings
         The fits' settings (``eval_spp`` and ``seed`` of the second holdout renders).
     """
+    # Refits that land on the same point differ only by float32 round-off (summation order across
+    # threads): below 1e-7 radiance the scatter is that, and reporting it would make the JSON
+    # depend on thread scheduling.
+    refit_scatter = round(float(refit_scatter), 7)
     crossed = None
     if _changes_sampling(reference, extended):
         spp = CROSSED_SPP_FACTOR * (settings.eval_spp or extended.scene.render.spp)
