@@ -28,7 +28,7 @@ import numpy as np
 
 from abs.brdf.basis import BRDFBasis
 from abs.brdf.directions import merl_entries, merl_entry_measure, uniform_hemisphere_directions
-from abs.brdf.reconstruct import default_eta
+from abs.brdf.reconstruct import coefficient_prior_variance, default_eta
 from abs.io.merl import MERL_SIZE
 
 __all__ = ["DirectionPlan", "plan_directions", "pair_weighted_gram", "expected_mapped_error"]
@@ -68,11 +68,7 @@ def pair_weighted_gram(basis: BRDFBasis) -> np.ndarray:
 
 def _error_variance(basis: BRDFBasis, eta: float) -> float:
     """s² = η τ² (the per-entry error variance that η stands for)."""
-    if basis.training_coefficients is None:
-        raise ValueError("this basis has no training_coefficients (the prior's variance τ²); "
-                         "build it with abs.brdf.pca.build_basis")
-    tau2 = float(np.mean(np.var(basis.training_coefficients.astype(np.float64), axis=0, ddof=1)))
-    return eta * tau2
+    return eta * coefficient_prior_variance(basis)
 
 
 def expected_mapped_error(basis: BRDFBasis, entries: np.ndarray, eta: float | None = None,

@@ -29,7 +29,7 @@ import numpy as np
 from abs.brdf.basis import BRDFBasis, map_brdf
 from abs.io.merl import MERL_SIZE
 
-__all__ = ["default_eta", "fit_coefficients", "reconstruct", "project_table"]
+__all__ = ["default_eta", "coefficient_prior_variance", "fit_coefficients", "reconstruct", "project_table"]
 
 _CHUNK = 1 << 18
 
@@ -53,8 +53,16 @@ def default_eta(basis: BRDFBasis, noise: float = 0.0) -> float:
     if basis.residual_variance is None or basis.training_coefficients is None:
         raise ValueError("this basis has no training-set statistics (residual_variance, "
                          "training_coefficients); pass eta explicitly")
-    tau2 = float(np.mean(np.var(basis.training_coefficients.astype(np.float64), axis=0, ddof=1)))
-    return (basis.residual_variance + noise**2) / tau2
+    return (basis.residual_variance + noise**2) / coefficient_prior_variance(basis)
+
+
+def coefficient_prior_variance(basis: BRDFBasis) -> float:
+    """τ², the variance of the training materials' coefficients (1/(m − 1) for m centred tables):
+    the prior variance of an unseen material's coefficients."""
+    if basis.training_coefficients is None:
+        raise ValueError("this basis has no training_coefficients (the prior's variance τ²); "
+                         "build it with abs.brdf.pca.build_basis")
+    return float(np.mean(np.var(basis.training_coefficients.astype(np.float64), axis=0, ddof=1)))
 
 
 def _observations(entries: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
