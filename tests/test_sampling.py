@@ -11,6 +11,7 @@ import emcee
 import numpy as np
 import pytest
 
+from abs.sampling.checks import run_checks
 from abs.sampling.ensemble import run_ensemble
 from abs.sampling.likelihood import crossed_log_likelihood, gaussian_log_likelihood
 from abs.sampling.posterior import LogPrior, ResidualPosterior
@@ -313,3 +314,12 @@ def test_adapted_independence_sampler_recovers_skewed_posterior():
     ess = run.chain.shape[0] / integrated_time(run.chain[:, None, :], quiet=True)
     assert np.all(np.abs(run.chain.mean(axis=0) - true_mean) < 4 * true_sd / np.sqrt(ess))
     assert np.allclose(run.chain.std(axis=0), true_sd, rtol=0.2)
+
+
+def test_checks_warn_of_a_too_narrow_noise_model_and_an_unfinished_chain():
+    done = {"noise": {"reduced_chi2_at_mode": 1.02}, "converged": True, "stop_reason": "converged"}
+    assert run_checks(done) == []
+    [narrow] = run_checks({**done, "noise": {"reduced_chi2_at_mode": 1.69}})
+    assert "1.69 times" in narrow and "1.30x" in narrow  # intervals too narrow by sqrt(chi^2)
+    [short] = run_checks({**done, "converged": False, "stop_reason": "max_evaluations", "steps": 3})
+    assert "max_evaluations" in short and "3 steps" in short

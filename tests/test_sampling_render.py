@@ -103,9 +103,12 @@ def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit
     assert summary["steps"] == 4 and summary["walkers"] == 8 and summary["stop_reason"] == "max_steps"
     assert 0 < summary["acceptance_fraction"] <= 1 and summary["renders"] >= 5 * 8 * 2
     assert {"tau", "r_hat", "wall_s", "noise", "burn_in"} <= set(summary)
+    # Four steps cannot meet emcee's rule: the run says so, in the file and at the report's top.
+    assert any("--resume" in c for c in summary["checks"])
     idata = arviz.from_netcdf(out / "posterior.nc")
     assert idata.posterior["environment.scale"].shape[:1] == (8,)
     html = (out / "report" / "report.html").read_text()
+    assert html.index("Checks") < html.index("Posterior")
     for name in ("corner.png", "traces.png", "predictive_00_v0.png", "predictive_01_v1.png"):
         assert (out / "report" / name).exists() and name in html
 

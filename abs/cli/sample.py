@@ -114,5 +114,7 @@ def run(args) -> int:
     if not args.no_report:
         print(f"report: {out / 'report' / 'report.html'}")
     print("\n".join(_table(summary)))
+    for check in summary["checks"]:
+        print(f"check: {check}")
     print(f"wrote {out / SUMMARY_FILE}")
     return 0

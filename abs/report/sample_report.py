@@ -69,7 +69,9 @@ def write_sample_report(folder: str | Path, summary: Mapping, chain: np.ndarray,
     stack = lambda key, sub=None: np.concatenate([  # noqa: E731
         np.broadcast_to(as_vector((e.get(sub) or {}).get(key) if sub else e.get(key)),
                         (len(e["mean"]),)) for e in params.values()])
-    sections = [html.section("Posterior", posterior_table(summary)),
+    checks = summary.get("checks") or []
+    sections = ([html.section("Checks", *(f"<p>{escape(c)}</p>" for c in checks))] if checks else [])
+    sections += [html.section("Posterior", posterior_table(summary)),
                 html.section("Run", _run_table(summary))]
     flat = kept.reshape(-1, kept.shape[-1])
     if flat.shape[0] > 1:

@@ -27,6 +27,7 @@ import numpy as np
 
 from abs.errors import InputError
 from abs.sampling.calibration import calibrate_render_noise
+from abs.sampling.checks import run_checks
 from abs.sampling.ensemble import EnsembleProgress, run_ensemble
 from abs.sampling.likelihood import NoiseModel, render_variance
 from abs.sampling.mode import find_mode
@@ -153,7 +154,7 @@ class SampleResult:
                 entry["truth"] = list(self.truth[name])
             offset += n
         clean = json.loads(json.dumps(parameters, default=float).replace("NaN", "null"))
-        return {
+        summary = {
             "parameters": clean,
             "labels": self.labels,
             "tau": {k: _finite(v) for k, v in zip(self.labels, tau)},
@@ -176,6 +177,7 @@ class SampleResult:
             "spp": self.settings.spp,
             "downsample": self.settings.downsample,
         }
+        return {**summary, "checks": run_checks(summary)}
 
 
 def _finite(v) -> float | None:
