@@ -7,7 +7,7 @@ solid angle on the hemisphere with θ <= 80°), reads the true BRDF at the neare
 :func:`abs.brdf.reconstruct.fit_coefficients` (η from :func:`default_eta`, and a few multiples of
 it for comparison) and scores it against the true table; and the same for the first n of 100
 direction pairs planned by :func:`abs.brdf.design.plan_directions` (chosen once, from the basis
-alone, among ``--candidates`` random pairs). Errors are averaged over pairs of
+alone, among ``--candidates`` random pairs), once per criterion (``mapped``, ``radiance``). Errors are averaged over pairs of
 directions (the measure of :func:`abs.brdf.directions.merl_entry_measure`, estimated on a fixed
 random subset of entries drawn in proportion to it), not over table entries, a third of which lie
 within 10° of the specular direction:
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from abs.brdf.basis import BRDFBasis
-from abs.brdf.design import plan_directions
+from abs.brdf.design import CRITERIA, plan_directions
 from abs.brdf.directions import merl_entries, merl_entry_measure, uniform_hemisphere_directions
 from abs.brdf.measured import STUDY_MATERIALS, measured_material_names, measured_table
 from abs.brdf.pca import build_basis
@@ -115,8 +115,12 @@ def main() -> None:
         raise SystemExit(f"not held out (in the basis' training set): {sorted(trained & set(materials))}")
     eta = default_eta(basis, args.noise)
     rng = np.random.default_rng(args.seed)
-    plan = plan_directions(basis, max(N_OBSERVATIONS), candidates=args.candidates, eta=eta,
-                           max_theta_deg=float(np.degrees(MAX_THETA)), rng=args.seed + 1)
+    # The planned rows' noise has its own stream, so that they leave the random rows' draws alone.
+    planned_rng = np.random.default_rng(args.seed + 2)
+    plans = {criterion: plan_directions(basis, max(N_OBSERVATIONS), candidates=args.candidates, eta=eta,
+                                        max_theta_deg=float(np.degrees(MAX_THETA)), rng=args.seed + 1,
+                                        criterion=criterion)
+             for criterion in CRITERIA}
     measure = merl_entry_measure()
     pairs = np.sort(rng.choice(measure.size, args.subset, p=measure / measure.sum()))
     entries = np.sort(rng.choice(np.flatnonzero(measure > 0), args.subset, replace=False))
@@ -137,25 +141,28 @@ def main() -> None:
                 for factor in ETA_FACTORS:
                     c = fit_coefficients(basis, entries, values, eta=factor * eta)
                     draws[factor].append(score(c))
-            # The planned pairs (the same for every material; only the noise is drawn again).
-            entries = merl_entries(plan.wi[:n], plan.wo[:n]).reshape(-1)
-            planned = [score(fit_coefficients(basis, entries, truth[entries] * (
-                1 + args.noise * rng.normal(size=entries.size)), eta=eta))
-                for _ in range(args.draws if args.noise > 0 else 1)]
             row["n"][n] = {f"eta_x{factor:g}": quartiles(ds) for factor, ds in draws.items()}
-            row["n"][n]["planned"] = quartiles(planned)
+            # The planned pairs (the same for every material; only the noise is drawn again).
+            for criterion, plan in plans.items():
+                entries = merl_entries(plan.wi[:n], plan.wo[:n]).reshape(-1)
+                planned = [score(fit_coefficients(basis, entries, truth[entries] * (
+                    1 + args.noise * planned_rng.normal(size=entries.size)), eta=eta))
+                    for _ in range(args.draws if args.noise > 0 else 1)]
+                row["n"][n][f"planned_{criterion}"] = quartiles(planned)
         results[name] = row
         print(f"\n{name}: mapped RMSE (median of {args.draws} draws), default eta = {eta:.3g}")
         print(f"  mean table {row['mean_table']['mapped_rmse']:.3f}   best in basis "
               f"{row['best_in_basis']['mapped_rmse']:.3f}   (relative cos-weighted: "
               f"{row['mean_table']['relative_cosine_rmse']:.3f}, {row['best_in_basis']['relative_cosine_rmse']:.3f})")
         print("  n    " + "  ".join(f"eta x{f:<5g}" for f in ETA_FACTORS)
-              + "    planned  rel.cos (default eta)  rel.cos planned")
+              + "  " + "  ".join(f"{c[:9]:>9}" for c in plans)
+              + "  | rel.cos: random " + " ".join(f"{c[:9]:>9}" for c in plans))
         for n, by_eta in row["n"].items():
             cells = "  ".join(f"{by_eta[f'eta_x{f:g}']['mapped_rmse']['median']:9.3f}" for f in ETA_FACTORS)
-            print(f"  {n:<4d} {cells}  {by_eta['planned']['mapped_rmse']['median']:9.3f}  "
-                  f"{by_eta['eta_x1']['relative_cosine_rmse']['median']:9.3f}  "
-                  f"{by_eta['planned']['relative_cosine_rmse']['median']:9.3f}")
+            planned = "  ".join(f"{by_eta[f'planned_{c}']['mapped_rmse']['median']:9.3f}" for c in plans)
+            relative = " ".join(f"{by_eta[f'planned_{c}']['relative_cosine_rmse']['median']:9.3f}" for c in plans)
+            print(f"  {n:<4d} {cells}  {planned}  |   {by_eta['eta_x1']['relative_cosine_rmse']['median']:9.3f} "
+                  f"{relative}")
 
     summary = {
         "basis": {"file": str(basis_path), "components": basis.n_components,
@@ -165,7 +172,7 @@ def main() -> None:
                      "max_theta_deg": float(np.degrees(MAX_THETA)), "scored_entries": args.subset,
                      "eta_factors": list(ETA_FACTORS), "seed": args.seed,
                      "planned": {"candidates": args.candidates,
-                                 "expected_mapped_rmse": plan.expected_rmse.tolist()}},
+                                 "expected_rmse": {c: plan.expected_rmse.tolist() for c, plan in plans.items()}}},
         "materials": results,
         "wall_s": time.perf_counter() - start,
         "machine": platform.platform(),
@@ -191,13 +198,16 @@ def plot(summary: dict, path: Path) -> None:
             colour = f"C{i}"
             stats = [row["n"][str(k) if str(k) in row["n"] else k]["eta_x1"][metric] for k in n]
             ax.plot(n, [s["median"] for s in stats], "o-", color=colour, label=name)
-            planned = [row["n"][str(k) if str(k) in row["n"] else k]["planned"][metric]["median"] for k in n]
-            ax.plot(n, planned, "s-.", color=colour, mfc="none")
+            for criterion, style in (("mapped", "s-."), ("radiance", "^:")):
+                planned = [row["n"][str(k) if str(k) in row["n"] else k][f"planned_{criterion}"][metric]["median"]
+                           for k in n]
+                ax.plot(n, planned, style, color=colour, mfc="none")
             ax.fill_between(n, [s["q25"] for s in stats], [s["q75"] for s in stats], color=colour, alpha=0.2)
             ax.axhline(row["mean_table"][metric], color=colour, ls="--", lw=0.8)
             ax.axhline(row["best_in_basis"][metric], color=colour, ls=":", lw=0.8)
         ax.set(xscale="log", yscale="log", xlabel="observed direction pairs n", ylabel=label)
-    axes[0].legend(fontsize=8, title="random: median, IQR; -. planned;\n-- mean table, : best in basis",
+    axes[0].legend(fontsize=8, title="random: median, IQR; planned: squares mapped,\ntriangles radiance; "
+                                     "-- mean table, : best in basis",
                    title_fontsize=7)
     ax = axes[2]
     for j, factor in enumerate(summary["protocol"]["eta_factors"]):

@@ -48,8 +48,8 @@ def test_plan_directions_writes_a_plan(tmp_path, capsys):
                  "--out", str(plan_file)]) == 0
     plan = json.loads(plan_file.read_text())
     assert len(plan["pairs"]) == 4 and plan["eta"] > 0
-    errors = [p["expected_mapped_rmse"] for p in plan["pairs"]]
-    assert errors == sorted(errors, reverse=True)
+    errors = [p["expected_rmse"] for p in plan["pairs"]]
+    assert errors == sorted(errors, reverse=True) and plan["criterion"] == "mapped"
     for pair in plan["pairs"]:
         wi, wo = np.array(pair["wi"]), np.array(pair["wo"])
         assert abs(np.linalg.norm(wi) - 1) < 1e-5 and wi[2] > 0 and wo[2] > 0
@@ -58,3 +58,9 @@ def test_plan_directions_writes_a_plan(tmp_path, capsys):
     assert main(["brdf", "plan-directions", str(basis_file), "-n", "501", "--candidates", "500",
                  "--out", str(plan_file)]) == 2
     assert "-n: n must lie in [1, 500]" in capsys.readouterr().err
+    assert main(["brdf", "plan-directions", str(basis_file), "-n", "2", "--candidates", "500",
+                 "--criterion", "radiance", "--out", str(plan_file)]) == 0
+    assert json.loads(plan_file.read_text())["criterion"] == "radiance"
+    assert main(["brdf", "plan-directions", str(basis_file), "-n", "2", "--criterion", "photons",
+                 "--out", str(plan_file)]) == 2
+    assert "--criterion: unknown criterion 'photons'" in capsys.readouterr().err

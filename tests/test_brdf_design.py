@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import analytic_tables
 
-from abs.brdf.design import expected_mapped_error, pair_weighted_gram, plan_directions
+from abs.brdf.design import CRITERIA, expected_error, pair_weighted_gram, plan_directions
 from abs.brdf.directions import merl_entries, merl_entry_measure, uniform_hemisphere_directions
 from abs.brdf.pca import build_basis
 from abs.brdf.reconstruct import default_eta, fit_coefficients
@@ -21,11 +21,13 @@ def basis_and_held_out():
     return basis, analytic_tables(8, seed=7)
 
 
-def test_plan_expected_error_matches_its_formula(basis_and_held_out):
+@pytest.mark.parametrize("criterion", sorted(CRITERIA))
+def test_plan_expected_error_matches_its_formula(basis_and_held_out, criterion):
     basis, _ = basis_and_held_out
-    plan = plan_directions(basis, 6, candidates=3000, rng=1)
-    gram = pair_weighted_gram(basis)
-    direct = [np.sqrt(expected_mapped_error(basis, merl_entries(plan.wi[:n], plan.wo[:n]), gram=gram))
+    plan = plan_directions(basis, 6, candidates=3000, rng=1, criterion=criterion)
+    assert plan.criterion == criterion
+    gram = pair_weighted_gram(basis, criterion)
+    direct = [np.sqrt(expected_error(basis, merl_entries(plan.wi[:n], plan.wo[:n]), gram=gram))
               for n in range(1, 7)]
     np.testing.assert_allclose(plan.expected_rmse, direct, rtol=1e-6)
     # Every added pair lowers the expected error; no pair is chosen twice.
@@ -61,10 +63,35 @@ def test_planned_directions_reconstruct_held_out_materials_better_than_random(ba
     assert np.mean(random < planned[:, None]) < 0.4
 
 
+def test_radiance_plan_reconstructs_reflected_radiance_better(basis_and_held_out):
+    """The mapped plan spends few pairs on the specular peak, where the cosine-weighted BRDF is
+    largest; the radiance plan aims at that error. Measured (8 held-out tables, n = 5): relative
+    cosine-weighted RMSE 0.065 (0.01-0.27 per table; the plan's linearised forecast: 0.033)
+    against 0.55 for the mapped plan, whose mapped RMSE is lower (0.33 against 0.49)."""
+    basis, held_out = basis_and_held_out
+    eta = default_eta(basis)
+    measure = merl_entry_measure()
+    scored = np.random.default_rng(4).choice(measure.size, 50_000, p=measure / measure.sum())
+    w = basis.cosine_weight[scored].astype(np.float64)
+
+    def relative_error(table, plan):
+        entries = merl_entries(plan.wi, plan.wo).reshape(-1)
+        c = fit_coefficients(basis, entries, table.reshape(-1)[entries], eta=eta)
+        f_hat, f = basis.table(c).reshape(-1)[scored], table.reshape(-1)[scored]
+        return float(np.linalg.norm(w * (f_hat - f)) / np.linalg.norm(w * f))
+
+    plans = {name: plan_directions(basis, 5, candidates=5000, rng=1, criterion=name) for name in CRITERIA}
+    errors = {name: np.array([relative_error(t, plan) for t in held_out]) for name, plan in plans.items()}
+    assert errors["radiance"].mean() < 0.3 * errors["mapped"].mean(), errors
+    assert errors["radiance"].max() < 0.5
+
+
 def test_plan_rejects_bad_input(basis_and_held_out):
     basis, _ = basis_and_held_out
     with pytest.raises(ValueError, match="eta must be > 0"):
         plan_directions(basis, 2, candidates=100, eta=0.0)
+    with pytest.raises(ValueError, match="unknown criterion 'photons'"):
+        plan_directions(basis, 2, candidates=100, criterion="photons")
     with pytest.raises(ValueError, match="n must lie in"):
         plan_directions(basis, 101, candidates=100)
     below = np.array([[0.0, 0.0, -1.0]])

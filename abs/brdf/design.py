@@ -14,6 +14,18 @@ expectation (the truncation error of the basis itself comes on top and does not 
 This is Bayesian A-optimal design. E does not depend on the measured values, so the directions
 can be planned before any measurement.
 
+The mapped error weighs every direction pair alike in log-relative units, so it spends few
+measurements on the narrow specular peak, where the reflected radiance is largest. The
+``"radiance"`` criterion weighs each entry by the squared change of the cosine-weighted BRDF per
+mapped unit, J_e = (median_e·w_e + ε)·exp(x̄_e) at the training mean x̄, relative to the mean
+table's cosine-weighted energy:
+
+    G = Σ_e μ_e J_e² q_e q_eᵀ / Σ_e μ_e (w_e f̄_e)²,
+
+so E is the expected squared relative cosine-weighted error ‖w(f̂ − f)‖²/‖wf̄‖² to first order
+(the error of renderings, not of the log table). Criteria are registered by name in
+:data:`CRITERIA`.
+
 Pairs are chosen greedily from a candidate set (each pair observes three entries, R, G and B:
 a rank-3 update of the precision, scored for every candidate at once by the Woodbury identity).
 Greedy selection is nested: the first n pairs of a selection of N are the greedy choice for n, so
@@ -22,6 +34,7 @@ one run plans every n. It is not guaranteed to find the best set, only a good on
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +44,7 @@ from abs.brdf.directions import merl_entries, merl_entry_measure, uniform_hemisp
 from abs.brdf.reconstruct import coefficient_prior_variance, default_eta
 from abs.io.merl import MERL_SIZE
 
-__all__ = ["DirectionPlan", "plan_directions", "pair_weighted_gram", "expected_mapped_error"]
+__all__ = ["DirectionPlan", "plan_directions", "pair_weighted_gram", "expected_error", "CRITERIA"]
 
 _CHUNK = 1 << 18
 
@@ -45,25 +58,55 @@ class DirectionPlan:
     wi, wo : ndarray, shape (n, 3)
         Unit directions in the local frame (z = normal).
     expected_rmse : ndarray, shape (n,)
-        Expected mapped RMSE (log-relative units) of the reconstruction from the first 1, 2, …, n
-        pairs, from the basis' own error model (``sqrt(E)``; truncation error not included).
+        Expected RMSE of the reconstruction from the first 1, 2, …, n pairs, from the basis' own
+        error model (``sqrt(E)``; truncation error not included), in the criterion's units:
+        log-relative for ``"mapped"``, a fraction of the mean table's cosine-weighted RMS for
+        ``"radiance"``.
+    criterion : str
+        The name in :data:`CRITERIA` the pairs were chosen by.
     """
 
     wi: np.ndarray
     wo: np.ndarray
     expected_rmse: np.ndarray
+    criterion: str = "mapped"
 
 
-def pair_weighted_gram(basis: BRDFBasis) -> np.ndarray:
-    """G = Σ_e μ_e q_e q_eᵀ / Σ_e μ_e (K, K): the basis' second moments averaged over direction
-    pairs rather than table entries."""
+def _mapped_weights(basis: BRDFBasis) -> np.ndarray:
+    """μ_e / Σ μ: every direction pair counts alike."""
     measure = merl_entry_measure()
+    return measure / measure.sum()
+
+
+def _radiance_weights(basis: BRDFBasis) -> np.ndarray:
+    """μ_e J_e² / Σ μ_e (w_e f̄_e)²: mapped errors converted to cosine-weighted BRDF errors at the
+    training mean, relative to the mean table."""
+    measure = merl_entry_measure()
+    slope = (basis.median.astype(np.float64) * basis.cosine_weight + basis.epsilon) \
+        * np.exp(basis.mean.astype(np.float64))                       # d(w·f)/dx at x = x̄
+    energy = np.sum(measure * np.maximum(slope - basis.epsilon, 0.0) ** 2)
+    return measure * slope ** 2 / energy
+
+
+#: Per-entry weights a_e of G = Σ_e a_e q_e q_eᵀ, by criterion name (add one to add a criterion).
+CRITERIA: dict[str, Callable[[BRDFBasis], np.ndarray]] = {
+    "mapped": _mapped_weights,
+    "radiance": _radiance_weights,
+}
+
+
+def pair_weighted_gram(basis: BRDFBasis, criterion: str = "mapped") -> np.ndarray:
+    """G = Σ_e a_e q_e q_eᵀ (K, K): the basis' second moments averaged over direction pairs
+    rather than table entries, weighted by the criterion (:data:`CRITERIA`)."""
+    if criterion not in CRITERIA:
+        raise ValueError(f"unknown criterion {criterion!r}; known: {', '.join(CRITERIA)}")
+    weights = CRITERIA[criterion](basis)
     k = basis.n_components
     gram = np.zeros((k, k))
     for start in range(0, MERL_SIZE, _CHUNK):
         q = basis.components[:, start:start + _CHUNK].astype(np.float64)
-        gram += (q * measure[start:start + _CHUNK]) @ q.T
-    return gram / measure.sum()
+        gram += (q * weights[start:start + _CHUNK]) @ q.T
+    return gram
 
 
 def _error_variance(basis: BRDFBasis, eta: float) -> float:
@@ -71,9 +114,10 @@ def _error_variance(basis: BRDFBasis, eta: float) -> float:
     return eta * coefficient_prior_variance(basis)
 
 
-def expected_mapped_error(basis: BRDFBasis, entries: np.ndarray, eta: float | None = None,
-                          gram: np.ndarray | None = None) -> float:
-    """E(S) of the module docstring for observed ``entries`` (flat table indices), mapped units².
+def expected_error(basis: BRDFBasis, entries: np.ndarray, eta: float | None = None,
+                   gram: np.ndarray | None = None) -> float:
+    """E(S) of the module docstring for observed ``entries`` (flat table indices), in the squared
+    units of the criterion whose ``gram`` is given (mapped units² by default).
 
     Parameters
     ----------
@@ -84,7 +128,7 @@ def expected_mapped_error(basis: BRDFBasis, entries: np.ndarray, eta: float | No
     eta : float, optional
         Default: :func:`abs.brdf.reconstruct.default_eta`.
     gram : ndarray, optional
-        :func:`pair_weighted_gram` of ``basis`` (computed when omitted).
+        :func:`pair_weighted_gram` of ``basis`` (the ``"mapped"`` one when omitted).
     """
     eta = default_eta(basis) if eta is None else float(eta)
     gram = pair_weighted_gram(basis) if gram is None else gram
@@ -95,7 +139,8 @@ def expected_mapped_error(basis: BRDFBasis, entries: np.ndarray, eta: float | No
 
 def plan_directions(basis: BRDFBasis, n: int, candidates: int | tuple[np.ndarray, np.ndarray] = 20_000,
                     eta: float | None = None, max_theta_deg: float = 80.0,
-                    rng: np.random.Generator | int | None = 0) -> DirectionPlan:
+                    rng: np.random.Generator | int | None = 0,
+                    criterion: str = "mapped") -> DirectionPlan:
     """Choose ``n`` direction pairs that minimise the expected reconstruction error (greedily).
 
     Parameters
@@ -115,6 +160,10 @@ def plan_directions(basis: BRDFBasis, n: int, candidates: int | tuple[np.ndarray
         Largest polar angle of random candidates, degrees.
     rng : Generator, int or None
         Random candidates' source.
+    criterion : str
+        What the plan minimises (:data:`CRITERIA`): ``"mapped"``, the expected log-relative error
+        of the table, or ``"radiance"``, the expected relative error of the cosine-weighted BRDF
+        (what renderings show; it measures more pairs near the specular peak).
 
     Returns
     -------
@@ -137,7 +186,7 @@ def plan_directions(basis: BRDFBasis, n: int, candidates: int | tuple[np.ndarray
     if not 1 <= n <= len(wi):
         raise ValueError(f"n must lie in [1, {len(wi)}] (the number of candidates), got {n}")
 
-    gram = pair_weighted_gram(basis)
+    gram = pair_weighted_gram(basis, criterion)
     rows = np.moveaxis(basis.components[:, merl_entries(wi, wo)].astype(np.float64), 0, -1)  # (C, 3, K)
     s2 = _error_variance(basis, eta)
     cov = np.eye(basis.n_components) / eta  # (Q_SᵀQ_S + ηI)⁻¹ with S empty
@@ -157,4 +206,4 @@ def plan_directions(basis: BRDFBasis, n: int, candidates: int | tuple[np.ndarray
         chosen.append(best)
         expected.append(s2 * float(np.trace(gram @ cov)))
     index = np.array(chosen)
-    return DirectionPlan(wi[index], wo[index], np.sqrt(np.array(expected)))
+    return DirectionPlan(wi[index], wo[index], np.sqrt(np.array(expected)), criterion)

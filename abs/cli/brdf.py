@@ -48,6 +48,10 @@ def add_parser(sub) -> None:
     plan.add_argument("--noise", type=float, default=0.0,
                       help="relative noise of the measured values (sets η; default %(default)s)")
     plan.add_argument("--seed", type=int, default=0, help="seed of the random candidates")
+    plan.add_argument("--criterion", default="mapped",
+                      help="what the plan minimises: mapped (log-relative error of the table) or "
+                           "radiance (relative error of the cosine-weighted BRDF, what renderings "
+                           "show) (default %(default)s)")
     plan.set_defaults(run=run_plan)
 
 
@@ -121,7 +125,7 @@ def run_plan(args) -> int:
     import numpy as np
 
     from abs.brdf.basis import BRDFBasis
-    from abs.brdf.design import plan_directions
+    from abs.brdf.design import CRITERIA, plan_directions
     from abs.brdf.directions import rusinkiewicz_angles
     from abs.brdf.reconstruct import default_eta
     from abs.errors import InputError
@@ -132,9 +136,12 @@ def run_plan(args) -> int:
                          "this basis has no training-set statistics; rebuild it with `abs brdf build-basis`")
     if not 0 < args.max_theta <= 90:
         raise InputError(None, "--max-theta", f"must be in (0, 90] degrees, got {args.max_theta}")
+    if args.criterion not in CRITERIA:
+        raise InputError(None, "--criterion", f"unknown criterion {args.criterion!r}; known: {', '.join(CRITERIA)}")
     eta = default_eta(basis, args.noise)
     try:
-        plan = plan_directions(basis, args.n, args.candidates, eta, args.max_theta, args.seed)
+        plan = plan_directions(basis, args.n, args.candidates, eta, args.max_theta, args.seed,
+                               args.criterion)
     except ValueError as exc:
         raise InputError(None, "-n", str(exc)) from None
     theta_h, theta_d, phi_d = (np.degrees(a) for a in rusinkiewicz_angles(plan.wi, plan.wo))
@@ -148,15 +155,15 @@ def run_plan(args) -> int:
               "theta_o_deg": round(float(theta_o[j]), 3), "phi_o_deg": round(float(phi_o[j]), 3),
               "theta_h_deg": round(float(theta_h[j]), 3), "theta_d_deg": round(float(theta_d[j]), 3),
               "phi_d_deg": round(float(phi_d[j]), 3),
-              "expected_mapped_rmse": round(float(plan.expected_rmse[j]), 5)}
+              "expected_rmse": round(float(plan.expected_rmse[j]), 5)}
              for j in range(args.n)]
-    document = {"basis": str(args.basis), "eta": eta, "noise": args.noise, "candidates": args.candidates,
-                "max_theta_deg": args.max_theta, "seed": args.seed,
-                "frame": "local shading frame, z = surface normal; expected_mapped_rmse: after the "
-                         "first k pairs (docs/brdf.md)",
+    document = {"basis": str(args.basis), "criterion": plan.criterion, "eta": eta, "noise": args.noise,
+                "candidates": args.candidates, "max_theta_deg": args.max_theta, "seed": args.seed,
+                "frame": "local shading frame, z = surface normal; expected_rmse: after the first k "
+                         "pairs, in the criterion's units (docs/brdf.md)",
                 "pairs": pairs}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(document, indent=2))
-    print(f"wrote {args.out}: {args.n} direction pairs, expected mapped RMSE "
+    print(f"wrote {args.out}: {args.n} direction pairs, expected {plan.criterion} RMSE "
           f"{plan.expected_rmse[0]:.3f} after 1, {plan.expected_rmse[-1]:.3f} after {args.n}")
     return 0
