@@ -22,7 +22,7 @@ NOISE_MODEL_TOO_NARROW = 1.2
 
 
 def run_checks(summary: Mapping) -> list[str]:
-    """Warnings about a finished run, each one sentence a user can act on.
+    """Warnings about a finished run, each a short message a user can act on.
 
     Parameters
     ----------
