@@ -17,20 +17,43 @@ from abs.render.integrator import PathTracer
 
 
 def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4, spp=64,
-                         max_depth=4, edges=True, full=False):
+                         max_depth=4, edges=True, full=False, mode="forward"):
     """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``).
 
-    ``full``: differentiate ``compiled.render`` (path tracer and ``[sensor]``) rather than the
-    path tracer alone (without Russian roulette at ``max_depth`` <= 5).
+    ``mode``: how the AD derivative is taken:
+
+    - ``"forward"``: :meth:`CompiledScene.render_forward` (tangents inside the path loop; what
+      fits use for Jacobians), silhouette boundary terms included;
+    - ``"replay"``: :meth:`CompiledScene.render_backward` (path replay; what gradients of
+      parameters that do not move paths use);
+    - ``"recorded"``: ``dr.backward`` through a recorded render. ``edges=False`` leaves the
+      silhouettes' boundary term out; ``full`` differentiates ``compiled.render`` (path tracer and
+      ``[sensor]``) rather than the path tracer alone (without Russian roulette).
+
+    The finite differences always difference ``compiled.render`` at ``x0 +- h direction`` with the
+    AD estimate's seeds (common random numbers).
     """
     x0 = compiled.get(name)
     direction = np.asarray(direction, float)
     tracer = PathTracer(max_depth=max_depth, rr_depth=1000)
+    weights_np = np.asarray(weights.numpy(), np.float64)
 
-    def loss(x, seed, grad):
-        value = mi.Float(np.asarray(x, np.float32))
-        if grad:
-            dr.enable_grad(value)
+    def primal(x, seed):
+        compiled.set(name, mi.Float(np.asarray(x, np.float32)))
+        return float(np.sum(compiled.render(camera, spp=spp, seed=seed, max_depth=max_depth).numpy()
+                            .astype(np.float64) * weights_np))
+
+    def derivative(seed):
+        if mode == "forward":
+            _, d = compiled.render_forward(camera, {name: direction}, spp=spp, seed=seed,
+                                           max_depth=max_depth)
+            return float(np.sum(d.numpy().astype(np.float64) * weights_np))
+        if mode == "replay":
+            _, g = compiled.render_backward(camera, weights_np, [name], spp=spp, seed=seed,
+                                            max_depth=max_depth)
+            return float(np.dot(g[name], direction))
+        value = mi.Float(np.asarray(x0, np.float32))
+        dr.enable_grad(value)
         compiled.set(name, value)
         if full:
             image = compiled.render(camera, spp=spp, seed=seed, max_depth=max_depth)
@@ -38,14 +61,11 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
             moving = compiled.moving_meshes() if edges else []
             image = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, spp, seed,
                                   moving=moving)
-        total = dr.sum(image * weights, axis=None)
-        if grad:
-            dr.backward(total, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-            return float(np.dot(np.array(dr.grad(value)), direction))
-        return float(np.array(total).ravel()[0])
+        dr.backward(dr.sum(image * weights, axis=None), flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+        return float(np.dot(np.array(dr.grad(value)), direction))
 
-    ad = [loss(x0, s, True) for s in range(seeds)]
-    fd = [(loss(x0 + h * direction, s, False) - loss(x0 - h * direction, s, False)) / (2 * h)
+    ad = [derivative(s) for s in range(seeds)]
+    fd = [(primal(x0 + h * direction, s) - primal(x0 - h * direction, s)) / (2 * h)
           for s in range(seeds)]
     compiled.set(name, x0)
     se = lambda v: float(np.std(v, ddof=1) / np.sqrt(len(v)))  # noqa: E731

@@ -30,6 +30,15 @@ def test_absorption_per_channel(setup, channel):
     assert_gradients_agree(*res)
 
 
+@pytest.mark.parametrize("mode", ["replay", "recorded"])
+def test_absorption_by_reverse_mode(setup, mode):
+    """The two reverse modes: path replay (fits' gradients) and a recorded render (dr.backward)."""
+    compiled, camera, weights = setup
+    res = directional_gradient(compiled, camera, "glass.absorption", [1.0, 0.5, 0.2], 0.5, weights,
+                               mode=mode)
+    assert_gradients_agree(*res)
+
+
 @pytest.mark.parametrize("channel", [0, 1, 2])
 def test_ior_per_channel(glass_scene_dir, channel):
     """Per-channel IOR of glass seen against the environment.
@@ -91,5 +100,6 @@ def test_pose_silhouette(silhouette_scene_dir, max_depth):
         assert_gradients_agree(*res, rel=0.1)
     if max_depth == 1:
         without = directional_gradient(compiled, camera, "sphere.pose", [1, 0, 0, 0, 0, 0], 0.003,
-                                       weights, max_depth=1, spp=16, seeds=2, edges=False)
+                                       weights, max_depth=1, spp=16, seeds=2, edges=False,
+                                       mode="recorded")
         assert without[0] == 0.0  # plain AD sees no gradient at all: the edge term is all of it

@@ -69,3 +69,95 @@ def test_large_seeds_are_wrapped_for_batched_renders(silhouette_scene_dir, monke
     other = compiled.render(camera, spp=4, seed=10**6 + 1).numpy()
     assert np.isfinite(big).all() and big.mean() > 0
     assert not np.array_equal(big, other)  # distinct seeds stay distinct after wrapping
+
+
+def _default_views(compiled, width: int, height: int, count: int):
+    from abs.simulate import place_cameras
+
+    return [Camera(v["K"], v["R"], v["t"], width, height) for v in place_cameras(compiled, count, width, height)]
+
+
+def test_views_spp_values_and_channels_reuse_kernels():
+    """The default scene (dispersive glass): a second view, another resolution, spp and seed, new
+    parameter values and a tangent on another colour channel compile nothing new, in primal and
+    forward-mode renders and in path replay."""
+    from pathlib import Path
+
+    compiled = compile_scene(load_scene(Path(__file__).resolve().parents[1] / "scenes/default/scene.toml"))
+    first_view, second_view = _default_views(compiled, 20, 15, 2)
+    other_size = _default_views(compiled, 28, 21, 1)[0]
+    weights = np.ones((15, 20, 3))
+
+    def run(camera, spp, seed, channel, absorption, ior):
+        compiled.set("glass.absorption", absorption)
+        compiled.set("glass.ior", ior)
+        compiled.render(camera, spp=spp, seed=seed).numpy()
+        tangent = np.eye(3)[channel]
+        compiled.render_forward(camera, {"glass.ior": tangent, "glass.absorption": tangent},
+                                spp=spp, seed=seed)
+        if camera.width == 20:
+            compiled.render_backward(camera, weights, ["glass.absorption", "environment.scale"],
+                                     spp=spp, seed=seed)
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        first = _kernel_hashes(lambda: run(first_view, 2, 0, 0, [4.0, 1.5, 2.5], [1.515, 1.52, 1.53]))
+        second = _kernel_hashes(lambda: (run(second_view, 3, 5, 2, [3.0, 2.0, 1.0], [1.50, 1.51, 1.52]),
+                                         run(other_size, 1, 7, 1, [3.0, 2.0, 1.0], [1.50, 1.51, 1.52])))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert first and second <= first, f"{len(second - first)} kernels compiled anew"
+
+
+def test_brdf_pca_renders_reuse_kernels(silhouette_scene_dir, tmp_path):
+    from abs.brdf.basis import BRDFBasis
+    from abs.io.merl import MERL_SIZE
+
+    rng = np.random.default_rng(0)
+    BRDFBasis(mean=np.zeros(MERL_SIZE, np.float32),
+              components=(rng.normal(size=(2, MERL_SIZE)) * 0.3).astype(np.float32),
+              median=np.full(MERL_SIZE, 0.2, np.float32), epsilon=1e-3).save(tmp_path / "basis.npz")
+    for asset in ("sphere.ply", "env.exr"):
+        (tmp_path / asset).write_bytes((silhouette_scene_dir / asset).read_bytes())
+    (tmp_path / "scene.toml").write_text(
+        '[environment]\nfile = "env.exr"\n\n[materials.paint]\ntype = "brdf_pca"\nbasis = "basis.npz"\n'
+        'coefficients = [0.5, -0.3]\n\n[[objects]]\nname = "sphere"\nmesh = "sphere.ply"\nmaterial = "paint"\n')
+    compiled = compile_scene(load_scene(tmp_path / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.05, 0.3]), np.array([0.0, 0.05, 0.0]))
+    camera = Camera(intrinsics_from_fov(16, 16, np.radians(25)), R, t, 16, 16)
+
+    def run(coefficients, spp, seed):
+        compiled.set("paint.coefficients", coefficients)
+        compiled.render(camera, spp=spp, seed=seed).numpy()
+        compiled.render_forward(camera, {"paint.coefficients": [1.0, 0.0]}, spp=spp, seed=seed)
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        first = _kernel_hashes(lambda: run([0.5, -0.3], 2, 0))
+        second = _kernel_hashes(lambda: run([0.1, 0.4], 4, 3))
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert first and second <= first, f"{len(second - first)} kernels compiled anew"
+
+
+def test_derivative_renders_bound_the_samples_in_flight(small_scene_dir, monkeypatch):
+    """Forward mode and path replay keep no recorded graph: their memory is the path loop's state
+    for the samples in flight, which CompiledScene bounds whatever the spp."""
+    import abs.render.compiled as compiled_module
+
+    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    camera = Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
+    cap = 16 * 12 * 2
+    monkeypatch.setattr(compiled_module, "MAX_SAMPLES_IN_FLIGHT", cap)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()
+        compiled.render_forward(camera, {"glass.absorption": [1.0, 0.0, 0.0]}, spp=16, seed=1)
+        compiled.render_backward(camera, np.ones((12, 16, 3)), ["glass.absorption"], spp=16, seed=1)
+        # The path-tracing kernels (thousands of operations; the small ones write films and
+        # scene buffers, sized by the image and the scene).
+        sizes = [k["size"] for k in dr.kernel_history() if k.get("operation_count", 0) > 500]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert sizes and max(sizes) <= cap, max(sizes)

@@ -4,9 +4,10 @@
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
 pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite differences:
 
-- :meth:`FitProblem.residuals` with ``jacobian=True`` pushes one tangent per parameter scalar
-  through an attached render (forward mode). With few scalars (the usual case: absorption, IOR,
-  scale, pose) this costs one render per scalar and gives the whole Jacobian that Gauss-Newton,
+- :meth:`FitProblem.residuals` with ``jacobian=True`` renders one forward-mode derivative per
+  parameter scalar (:meth:`CompiledScene.render_forward`: tangents carried inside the path loop,
+  about 1.6 primal renders each, memory independent of samples and path length). With few scalars
+  (the usual case: absorption, IOR, scale, pose) this gives the whole Jacobian that Gauss-Newton,
   Levenberg-Marquardt and the Laplace approximation need.
 - :meth:`FitProblem.gradient` gives the same ``J^T r`` by one reverse pass (plus one primal
   render for ``r``), for problems with many scalars (textures, BRDF coefficients), used by Adam.
@@ -20,19 +21,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import drjit as dr
-import mitsuba as mi
 import numpy as np
 
 from abs.fitting.observations import Observation
 from abs.fitting.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
-from abs.render.jit import from_numpy
 
-__all__ = ["FitProblem", "AD_SAMPLES_PER_BATCH"]
-
-# Camera samples recorded per AD pass: the recorded graph grows with it (about 1-2 kB per path on
-# the CPU backend at depth 12), so large AD renders are split into spp batches.
-AD_SAMPLES_PER_BATCH = 1 << 18
+__all__ = ["FitProblem"]
 
 
 def _view_seed(seed: int, view: int) -> int:
@@ -88,19 +83,6 @@ class FitProblem:
         """Write physical values (detached) into the compiled scene."""
         for name, value in self.vector.split(theta).items():
             self.compiled.set(name, value)
-
-    def _attach(self, theta: np.ndarray) -> mi.Float:
-        """Write ``theta`` as one attached Dr.Jit array; returns it."""
-        attached = from_numpy(mi.Float, theta)
-        dr.enable_grad(attached)
-        for name, s in self.vector.slices().items():
-            index = dr.arange(mi.UInt32, s.stop - s.start) + s.start
-            self.compiled.set(name, dr.gather(mi.Float, attached, index))
-        return attached
-
-    def _batches(self, camera, spp: int) -> list[int]:
-        per = max(1, min(spp, AD_SAMPLES_PER_BATCH // (camera.width * camera.height)))
-        return [per] * (spp // per) + ([spp % per] if spp % per else [])
 
     def render(self, observation: Observation, theta: np.ndarray, spp: int, seed: int) -> np.ndarray:
         """Primal rendering (H, W, 3) of one observation at ``theta``."""
@@ -173,36 +155,38 @@ class FitProblem:
 
     def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int):
         cam, p = obs.camera, self.vector.size
-        image = np.zeros((cam.height, cam.width, 3))
-        jac = np.zeros((cam.height, cam.width, 3, p))
-        for b, n in enumerate(self._batches(cam, spp)):
-            for i in range(p):
-                # One attached render per tangent (the same seed, so the same samples): a
-                # recorded graph cannot be traversed twice when parameters are read inside the
-                # BSDFs' virtual calls (Dr.Jit refuses to re-enter their isolated scopes).
-                attached = self._attach(theta)
-                rendered = self.compiled.render(cam, spp=n, seed=seed + b, max_depth=self.max_depth)
-                self.counter.add(cam, n)
-                if i == 0:
-                    image += rendered.numpy() * (n / spp)
-                tangent = np.zeros(p, np.float32)
-                tangent[i] = 1.0
-                dr.set_grad(attached, from_numpy(mi.Float, tangent))
-                dr.forward_to(rendered)
-                jac[..., i] += dr.grad(rendered).numpy() * (n / spp)
-                del rendered, attached
-        self.set_values(theta)  # drop the graph
+        self.set_values(theta)
+        image, jac = None, np.zeros((cam.height, cam.width, 3, p))
+        slices = self.vector.slices()
+        for i in range(p):
+            # One forward-mode render per parameter scalar, all with the same seed (the same
+            # samples). Every fitted parameter is given a tangent (zero but for scalar i), so that
+            # every column is rendered alike (e.g. dispersive glass splits its paths in each).
+            tangent = np.zeros(p)
+            tangent[i] = 1.0
+            rendered, derivative = self.compiled.render_forward(
+                cam, {name: tangent[s] for name, s in slices.items()}, spp=spp, seed=seed,
+                max_depth=self.max_depth)
+            self.counter.add(cam, spp)
+            if image is None:
+                image = rendered.numpy().astype(np.float64)
+            jac[..., i] = derivative.numpy()
         return image, jac
 
     def gradient(self, theta: np.ndarray, spp: int, seed: int,
                  jacobian_seed: int) -> tuple[float, np.ndarray]:
-        """Half the sum of squared residuals and its gradient ``J^T r`` w.r.t. ``theta``, by one
-        reverse pass per view and spp batch.
+        """Half the sum of squared residuals and its gradient ``J^T r`` w.r.t. ``theta``.
 
         ``r`` comes from the render seeded ``seed`` and ``J`` from the independent renders seeded
         ``jacobian_seed``, as in :meth:`residuals` (so ``J^T r`` is unbiased); the result equals
-        ``J.T @ r`` of ``residuals(theta, spp, seed, True, jacobian_seed)``.
+        ``J.T @ r`` of ``residuals(theta, spp, seed, True, jacobian_seed)``. Parameters that only
+        scale what paths carry (textures, BRDF tables, absorption, the environment) take one path
+        replay per view, whatever their number; parameters that move paths (IOR, roughness,
+        pose) take one forward-mode render per scalar.
         """
+        slices = self.vector.slices()
+        replayed = [n for n in self.vector.names if not self.compiled.specs[n].moves_paths]
+        moving = [n for n in self.vector.names if self.compiled.specs[n].moves_paths]
         total, grad = 0.0, np.zeros(self.vector.size)
         for k, obs in enumerate(self.observations):
             cam = obs.camera
@@ -211,14 +195,21 @@ class FitProblem:
             total += 0.5 * float(r @ r)
             clamped, live = self._clamp(image)
             residual = (clamped - obs.photograph) * (obs.mask[..., None] & live)
-            weight = from_numpy(mi.Float, residual)
-            for b, n in enumerate(self._batches(cam, spp)):
-                attached = self._attach(theta)
-                rendered = self.compiled.render(cam, spp=n, seed=_view_seed(jacobian_seed, k) + b,
-                                                max_depth=self.max_depth)
-                self.counter.add(cam, n)
-                dr.backward(dr.sum(rendered.array * weight) * (n / spp))
-                grad += dr.grad(attached).numpy()
-                del rendered, attached
+            view_seed = _view_seed(jacobian_seed, k)
+            if replayed:
+                _, g = self.compiled.render_backward(cam, residual, replayed, spp=spp, seed=view_seed,
+                                                     max_depth=self.max_depth)
+                self.counter.add(cam, spp)
+                for name in replayed:
+                    grad[slices[name]] += g[name]
+            for name in moving:
+                for i in range(slices[name].start, slices[name].stop):
+                    tangent = np.zeros(self.vector.size)
+                    tangent[i] = 1.0
+                    _, derivative = self.compiled.render_forward(
+                        cam, {n: tangent[slices[n]] for n in moving}, spp=spp, seed=view_seed,
+                        max_depth=self.max_depth)
+                    self.counter.add(cam, spp)
+                    grad[i] += float(np.sum(derivative.numpy() * residual))
         self.set_values(theta)
         return total, grad

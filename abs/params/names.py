@@ -32,6 +32,9 @@ class Parameter:
         Inclusive physical bounds.
     initial : ndarray or None
         Value in the scene file.
+    moves_paths : bool
+        Whether the parameter moves light paths (geometry, refraction) rather than only scaling
+        what they carry: its derivatives come from forward mode, never from path replay.
     """
 
     name: str
@@ -40,6 +43,7 @@ class Parameter:
     lower: float
     upper: float
     initial: np.ndarray | None
+    moves_paths: bool = False
 
     @property
     def owner(self) -> str:
@@ -67,8 +71,9 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         for field, spec in material.parameters().items():
             initial = material.value(field) if spec.size != -1 and field in material._toml else None
             specs[f"{name}.{field}"] = Parameter(f"{name}.{field}", spec.size, spec.unit,
-                                                 spec.lower, spec.upper, initial)
+                                                 spec.lower, spec.upper, initial, spec.moves_paths)
     for obj in scene.objects:
         specs[f"{obj.name}.pose"] = Parameter(f"{obj.name}.pose", 6, "m, m, m, rad, rad, rad",
-                                              -INF, INF, np.asarray(obj.pose, dtype=np.float64))
+                                              -INF, INF, np.asarray(obj.pose, dtype=np.float64),
+                                              moves_paths=True)
     return specs

@@ -31,7 +31,10 @@ from abs.scene.scene import Scene
 
 __all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
 
-MAX_SAMPLES_IN_FLIGHT = 1 << 22
+# Camera samples per launch. Every render mode (primal, forward, replay) splits spp alike, so
+# the same seed gives the same samples in each; 2^21 keeps the forward mode's doubled loop state
+# well under a gigabyte.
+MAX_SAMPLES_IN_FLIGHT = 1 << 21
 
 
 def rotation_matrix(r) -> mi.Matrix3f:
@@ -85,7 +88,10 @@ class CompiledScene:
                 self.set(f"{obj.name}.pose", from_numpy(mi.Float, obj.pose))
         for name, material in scene.materials.items():
             for field, mspec in material.parameters().items():
-                if mspec.mitsuba_key is None:  # e.g. brdf_pca: table computed from coefficients
+                # Every value goes through set() once: Mitsuba builds plugins with their values as
+                # kernel literals, and the first set() would otherwise compile every kernel anew.
+                # (brdf_pca computes its table from the coefficients here.)
+                if f"{name}.{field}" in self.values:
                     self.set(f"{name}.{field}", self.values[f"{name}.{field}"])
 
     # ------------------------------------------------------------- building
@@ -210,29 +216,165 @@ class CompiledScene:
         return out
 
     # -------------------------------------------------------------- render
+    def _tracer(self, max_depth: int | None) -> PathTracer:
+        return PathTracer(max_depth=max_depth or self.scene.render.max_depth,
+                          subsurface=self.subsurface())
+
+    @staticmethod
+    def _batches(camera: Camera, spp: int, samples_in_flight: int) -> list[int]:
+        """spp split into batches of at most ``samples_in_flight`` camera samples."""
+        per = max(1, min(spp, samples_in_flight // (camera.width * camera.height)))
+        return [per] * (spp // per) + ([spp % per] if spp % per else [])
+
     def render(self, camera: Camera, spp: int | None = None, seed: int = 0,
                max_depth: int | None = None) -> mi.TensorXf:
         """Render ``camera``'s view at the scene's ``[render]`` settings unless overridden.
 
         Returns a ``TensorXf`` of shape ``(height, width, 3)``: the radiance as the sensor records
         it (``[sensor]``: vignetting, stray light, response; linear RGB radiance when those are at
-        their null values), attached to the AD graph of every parameter set with gradients enabled.
+        their null values), attached to the AD graph of every parameter set with gradients enabled
+        (then ``dr.backward`` and ``dr.forward_to`` work on it; for one directional derivative,
+        :meth:`render_forward` is faster and needs far less memory).
         """
-        tracer = PathTracer(max_depth=max_depth or self.scene.render.max_depth,
-                            subsurface=self.subsurface())
-        spp = spp or self.scene.render.spp
-        # Bound the wavefront (samples in flight) so large primal renders fit in memory; each
-        # batch gets its own seed and the batches are averaged.
-        per_batch = max(1, min(spp, MAX_SAMPLES_IN_FLIGHT // (camera.width * camera.height)))
-        batches = [per_batch] * (spp // per_batch) + ([spp % per_batch] if spp % per_batch else [])
+        return self.sensor.apply(self._radiance(camera, spp or self.scene.render.spp, seed, max_depth),
+                                 camera)
+
+    def _radiance(self, camera: Camera, spp: int, seed: int, max_depth: int | None) -> mi.TensorXf:
+        """The path tracer's image (before the sensor), in batches of bounded samples in flight."""
+        tracer = self._tracer(max_depth)
+        # Bound the wavefront (samples in flight) so large renders fit in memory; each batch gets
+        # its own seed and the batches are averaged.
+        batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
         image = None
         for i, n in enumerate(batches):
             part = tracer.render(self.mitsuba_scene, self.environment, camera, n,
                                  seed * 7919 + i if len(batches) > 1 else seed,
-                                 moving=self.moving_meshes()) * (n / spp)
+                                 moving=self.moving_meshes()) * opaque(mi.Float, n / spp)
             image = part if image is None else image + part
             dr.eval(image)
-        return self.sensor.apply(image, camera)
+        return image
+
+    def render_forward(self, camera: Camera, tangents: dict, spp: int | None = None, seed: int = 0,
+                       max_depth: int | None = None) -> tuple[mi.TensorXf, mi.TensorXf]:
+        """A rendering and its derivative along ``tangents``, by forward mode inside the path loop.
+
+        Parameters
+        ----------
+        tangents : dict of str to array-like
+            Parameter name to its tangent (the direction of change, in the parameter's units);
+            parameters not named are held fixed.
+
+        Returns
+        -------
+        image, derivative : TensorXf, shape (height, width, 3)
+            Detached; ``derivative`` is ``sum_k d image / d p_k * tangent_k``, with the silhouette
+            boundary term of moving objects included. The same ``seed`` gives the same samples as
+            :meth:`render` (common random numbers) when no dispersive glass is being differentiated.
+        """
+        leaves = []
+        for name, tangent in tangents.items():
+            spec = self._spec(name)
+            value = from_numpy(mi.Float, self.get(name))
+            dr.enable_grad(value)
+            self.set(name, value)
+            tangent = np.asarray(tangent, np.float32).ravel()
+            if tangent.size != dr.width(value):
+                raise ValueError(f"{name}: tangent has {tangent.size} values, the parameter {spec.size}")
+            dr.set_grad(value, from_numpy(mi.Float, tangent))
+            leaves.append(value)
+        try:
+            # Push the tangents into the scene's members (BSDF fields, vertex positions, ...) and
+            # cut the edges that led there: the path loop reads those members inside its own AD
+            # scope, which may not reach back across edges outside it.
+            dr.enqueue(dr.ADMode.Forward, leaves)
+            dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges)
+            tracer = self._tracer(max_depth)
+            spp = spp or self.scene.render.spp
+            batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
+            image = derivative = None
+            for i, n in enumerate(batches):
+                part, d_part = tracer.render_forward(
+                    self.mitsuba_scene, self.environment, camera, n,
+                    seed * 7919 + i if len(batches) > 1 else seed, moving=self.moving_meshes())
+                share = opaque(mi.Float, n / spp)
+                image = part * share if image is None else image + part * share
+                derivative = d_part * share if derivative is None else derivative + d_part * share
+                dr.eval(image, derivative)
+            with dr.resume_grad():
+                radiance = mi.TensorXf(image)
+                dr.enable_grad(radiance)
+                dr.set_grad(radiance, derivative)
+                recorded = self.sensor.apply(radiance, camera)
+                derivative = dr.forward_to(recorded, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            return dr.detach(recorded), mi.TensorXf(derivative)
+        finally:
+            for name in tangents:
+                self.set(name, from_numpy(mi.Float, self.get(name)))
+
+
+    def render_backward(self, camera: Camera, weight, names, spp: int | None = None, seed: int = 0,
+                        max_depth: int | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The gradient of ``sum(weight * rendering)`` with respect to ``names``, by path replay.
+
+        Parameters
+        ----------
+        weight : array-like, shape (height, width, 3)
+            The loss's derivative with respect to the (sensor-applied) rendering.
+        names : sequence of str
+            Parameters to differentiate; none may move paths (``Parameter.moves_paths``: IOR,
+            roughness, pose), whose derivatives need :meth:`render_forward`.
+
+        Returns
+        -------
+        image : ndarray, shape (height, width, 3)
+            The rendering the gradient belongs to (float64).
+        gradient : dict of str to ndarray
+            One array per name, in the parameter's units.
+        """
+        moving = [n for n in names if self._spec(n).moves_paths]
+        if moving:
+            raise ValueError(f"{', '.join(moving)} move light paths: path replay cannot "
+                             "differentiate them; use render_forward")
+        weight = mi.TensorXf(from_numpy(mi.Float, weight), (camera.height, camera.width, 3))
+        leaves = {}
+        for name in names:
+            value = from_numpy(mi.Float, self.get(name))
+            dr.enable_grad(value)
+            self.set(name, value)
+            leaves[name] = value
+        tracer = self._tracer(max_depth)
+        spp = spp or self.scene.render.spp
+        batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
+
+        def through_sensor(radiance):
+            # d loss / d radiance through the sensor model; the sensor's own parameters (if
+            # differentiated) receive their part here.
+            with dr.resume_grad():
+                radiance = mi.TensorXf(radiance)
+                dr.enable_grad(radiance)
+                dr.backward_from(self.sensor.apply(radiance, camera) * weight)
+                return dr.grad(radiance)
+
+        try:
+            if len(batches) == 1:
+                image = tracer.render_backward(self.mitsuba_scene, self.environment, camera, spp,
+                                               seed, through_sensor)
+            else:
+                # The sensor is linearised at the whole image; each batch replays its paths.
+                with dr.suspend_grad():
+                    image = self._radiance(camera, spp, seed, max_depth)
+                adjoint = through_sensor(image)
+                for i, n in enumerate(batches):
+                    tracer.render_backward(self.mitsuba_scene, self.environment, camera, n,
+                                           seed * 7919 + i,
+                                           lambda img: adjoint * opaque(mi.Float, n / spp))
+            dr.traverse(dr.ADMode.Backward)
+            with dr.suspend_grad():
+                recorded = self.sensor.apply(image, camera).numpy().astype(np.float64)
+            return recorded, {name: dr.grad(leaves[name]).numpy().astype(np.float64) for name in names}
+        finally:
+            for name in names:
+                self.set(name, from_numpy(mi.Float, self.get(name)))
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

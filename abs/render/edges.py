@@ -87,8 +87,11 @@ def silhouette_edges(vertices: np.ndarray, mesh: MovingMesh, eye: np.ndarray) ->
 
 
 def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_samples: int,
-                  seed: int, channel: int) -> mi.TensorXf:
-    """The silhouette boundary term of the image derivative (zero-valued, attached)."""
+                  seed: int, split: bool) -> mi.TensorXf:
+    """The silhouette boundary term of the image derivative (zero-valued, attached).
+
+    ``split``: whether paths split by colour channel at dispersive glass, as in the interior render.
+    """
     w, h = camera.width, camera.height
     flat = dr.zeros(mi.Float, w * h * 3)
     # All moving meshes as one vertex array, with edges as global vertex indices.
@@ -138,8 +141,8 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
             u = from_numpy(mi.Float, x[:, 0] + sign * _PROBE_OFFSET_PX * normal[:, 0])
             v = from_numpy(mi.Float, x[:, 1] + sign * _PROBE_OFFSET_PX * normal[:, 1])
             origin, d = camera.rays(u, v)
-            ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
-            radiance.append(tracer._trace(scene, env, ray, sampler))
+            ray = mi.Ray3f(origin, d, 3.0, mi.Color0f())  # time 3: no colour channel chosen yet
+            radiance.append(tracer.trace(scene, env, ray, sampler, split)[0])
         difference = radiance[1] - radiance[0]
     # Opaque: the silhouette's length changes with the pose and must not become a kernel literal.
     contribution = difference * velocity * opaque(mi.Float, total / n_samples)

@@ -1,19 +1,45 @@
 """abs's path tracer: unidirectional path tracing with environment importance sampling and MIS,
-differentiated by plain reverse-mode AD with *attached* sampling.
+as one symbolic Dr.Jit loop, differentiated with *attached* sampling.
 
 Why our own integrator: Mitsuba's ``prb`` family detaches sampled directions by design, so the
 gradient of an image with respect to a refractive index (which moves refracted directions) is
 lost, and C++ ``path`` drops the direction's gradient too (shared/docs/mitsuba-facts.md). Here the
-direction returned by every BSDF sample stays on the AD graph, so IOR, absorption, environment
-(scale, rotation), reflectance and pose gradients all follow from one code path. Memory grows
-with the recorded graph, so AD renders use small images or few samples per pass.
+direction returned by every BSDF sample stays differentiable, so IOR, absorption, environment
+(scale, rotation), reflectance and pose derivatives all follow from one code path.
+
+Three modes and a replay, one loop body (:meth:`PathTracer._step`):
+
+- ``primal``: a symbolic loop (``dr.while_loop``). The body is traced once and compiled into one
+  kernel whatever ``max_depth`` is, so the first render compiles in about a second (the unrolled
+  Python loop this replaced took 111 s for the default scene) and renders run at the speed of
+  Mitsuba's own ``path`` (``benchmarks/render_speed.py``).
+- ``forward``: forward-mode derivatives carried *inside* the symbolic loop. The loop state holds,
+  beside the ray origin and direction, throughput and previous BSDF pdf, their tangents; each
+  iteration makes the incoming state fresh AD leaves carrying those tangents, runs the body with
+  gradients on, and reads the outgoing tangents with ``dr.forward_to``. Parameters enter with the
+  tangents the caller pushed into them beforehand (:meth:`CompiledScene.render_forward`). Memory
+  is the loop state's, twice over: it does not grow with path length, samples or the number of
+  parameters, and one Jacobian column costs about 1.6 primal renders.
+- ``recorded``: an evaluated loop whose iterations are recorded on the AD graph, so that
+  ``dr.backward`` and ``dr.forward_to`` work on the returned image as on any Dr.Jit expression.
+  Used automatically when a parameter has gradients enabled (interactive use, tests); memory
+  grows with the samples in flight.
+- reverse mode by path replay (:meth:`PathTracer.render_backward`, Vicini et al. 2021): a primal
+  pass, then the same paths again, backpropagating each vertex's contribution. Constant memory,
+  about two primal renders, exact for every parameter whose derivative stays at its vertex
+  (textures, BRDF tables, absorption, environment); parameters that move paths (IOR, roughness,
+  pose) take forward mode.
 
 Pieces:
 
 - Pixels: sample positions are drawn from a tent filter of radius 1 pixel around each pixel centre
   (each pixel integrates ``tent(x - p) L(x)``).
-- Colour-channel passes: glass with a different IOR per channel renders three passes, pass ``k``
-  refracting with ``ior[k]`` and contributing channel ``k`` (see :mod:`abs.render.bsdfs.dielectric`).
+- Dispersion: a path carries all three colour channels until it first meets glass whose IOR
+  differs between channels (or is being differentiated). There it picks one channel uniformly,
+  keeps only that channel with weight 3 (an unbiased estimate of the three), and refracts with
+  that channel's IOR from then on (see :mod:`abs.render.bsdfs.dielectric`). Paths that never
+  reach glass keep their full colour: unlike one render per channel, the cost of dispersion is
+  paid only where it acts. The active channel travels per lane in ``si.time`` (3: not yet split).
 - Lighting: the environment (:class:`~abs.render.environment.Environment`) is evaluated by our
   differentiable lookup, sampled by luminance; BSDF and light samples are combined with the power
   heuristic. The weights stay *attached*: BSDF samples are differentiated in primary-sample
@@ -38,15 +64,27 @@ from abs.render.bsdfs.dielectric import DielectricBSDF
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
-from abs.render.jit import seed32
+from abs.render.jit import opaque, seed32
 
-__all__ = ["PathTracer"]
+__all__ = ["PathTracer", "MODES"]
+
+MODES = ("primal", "forward", "recorded")
+
+# The channel value of a path that has not met dispersive glass yet (see the module docstring).
+_ALL_CHANNELS = 3
 
 
 def _mis_power(a, b):
     a2, b2 = dr.square(a), dr.square(b)
     return dr.select(a2 + b2 > 0.0, a2 / (a2 + b2), 0.0)
 
+
+def _leaf(value, tangent):
+    """A fresh AD leaf with ``value``'s (detached) value and ``tangent`` as its gradient."""
+    x = type(value)(dr.detach(value))
+    dr.enable_grad(x)
+    dr.set_grad(x, tangent)
+    return x
 
 
 @dataclass
@@ -70,120 +108,282 @@ class PathTracer:
 
     # ---------------------------------------------------------------- public
     def render(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int = 0,
-               moving: list[MovingMesh] | None = None, channels: str = "auto") -> mi.TensorXf:
+               moving: list[MovingMesh] | None = None, dispersion: str = "auto") -> mi.TensorXf:
         """Render one view; returns a linear-RGB ``TensorXf`` of shape ``(height, width, 3)``.
 
-        The result stays attached to the AD graph of any parameter with gradients enabled.
+        When any input has gradients enabled (and gradients are not suspended), the render is
+        recorded on the AD graph (``recorded`` mode, see the module docstring) so that
+        ``dr.backward``/``dr.forward_to`` work on the result; otherwise it is a primal render.
 
         Parameters
         ----------
         spp : int
-            Samples per pixel (per colour pass).
+            Samples per pixel.
         seed : int
             Seed of the sample sequence; the same seed gives the same noise (common random numbers).
         moving : list of MovingMesh, optional
             Meshes whose vertices are attached to differentiated parameters: their silhouettes'
             boundary term is added to the gradient.
-        channels : {"auto", "single", "per-channel"}
-            ``auto`` renders per-channel passes only when some glass has distinct per-channel IORs
-            or an IOR being differentiated.
+        dispersion : {"auto", "split", "none"}
+            ``auto`` splits paths by colour channel at dispersive glass only when some glass has
+            distinct per-channel IORs or an IOR with gradients enabled.
         """
-        glass = [s.bsdf() for s in scene.shapes() if isinstance(s.bsdf(), DielectricBSDF)]
-        per_channel = channels == "per-channel" or (channels == "auto" and any(
-            dr.grad_enabled(b.ior) or len({float(c[0]) for c in (b.ior.x, b.ior.y, b.ior.z)}) > 1
-            for b in glass))
-        if not per_channel:
-            return self._render_pass(scene, env, camera, spp, seed, moving, channel=0)
-        result = None
-        for k in range(3):
-            image = self._render_pass(scene, env, camera, spp, seed * 3 + k, moving, channel=k)
-            mask = mi.TensorXf(dr.tile(mi.Float([1.0 if c == k else 0.0 for c in range(3)]),
-                                       camera.width * camera.height), image.shape)
-            result = image * mask if result is None else result + image * mask
-        return result
+        self._check_moving(camera, moving)
+        split = self._split(scene, dispersion)
+        mode = "recorded" if (moving or self._attached(scene, env)) else "primal"
+        image, _ = self._render_pass(scene, env, camera, spp, seed, split, mode)
+        if moving:
+            image = image + boundary_term(self, scene, env, camera, moving,
+                                          n_samples=2 * spp * (camera.width + camera.height),
+                                          seed=seed, split=split)
+        return image
+
+    def render_forward(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int,
+                       seed: int = 0, moving: list[MovingMesh] | None = None,
+                       dispersion: str = "auto") -> tuple[mi.TensorXf, mi.TensorXf]:
+        """Render one view and its forward-mode derivative.
+
+        The scene's parameters must already hold their tangents as gradients, with no AD edges
+        leading into them (push a tangent from your own leaf with ``dr.enqueue`` and
+        ``dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges)``; :meth:`CompiledScene.render_forward`
+        does this). Returns detached ``(image, d image)``, both ``(height, width, 3)``.
+        """
+        self._check_moving(camera, moving)
+        split = self._split(scene, dispersion)
+        image, tangent = self._render_pass(scene, env, camera, spp, seed, split, "forward")
+        if moving:
+            with dr.resume_grad():
+                edges = boundary_term(self, scene, env, camera, moving,
+                                      n_samples=2 * spp * (camera.width + camera.height), seed=seed,
+                                      split=split)
+                tangent = tangent + dr.forward_to(edges, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+        return image, dr.detach(tangent)
+
+    def trace(self, scene: mi.Scene, env: Environment, ray: mi.Ray3f, sampler: mi.Sampler,
+              split: bool = False, mode: str = "primal") -> tuple[mi.Color3f, mi.Color3f | None]:
+        """Radiance arriving along ``ray`` (one path per lane) and, in ``forward`` mode, its tangent.
+
+        ``ray.time`` must be 3 (no channel chosen yet) or the one colour channel a path carries.
+        """
+        if mode not in MODES:
+            raise ValueError(f"unknown mode {mode!r}; one of {', '.join(MODES)}")
+        forward = mode == "forward"
+        zero3 = mi.Vector3f(0.0)
+        state = (sampler, mi.Ray3f(ray), mi.Color3f(1.0), mi.Color3f(0.0), mi.Bool(True),
+                 mi.Float(1.0), mi.Bool(True), mi.UInt32(0),
+                 # tangents of origin, direction, throughput, radiance and previous pdf
+                 zero3, zero3, mi.Color3f(0.0), mi.Color3f(0.0), mi.Float(0.0))
+
+        def cond(sampler, ray, beta, radiance, active, *rest):
+            return active
+
+        def body(sampler, ray, beta, radiance, active, prev_pdf, prev_delta, depth,
+                 t_origin, t_direction, t_beta, t_radiance, t_pdf):
+            if not forward:
+                light, ray, beta, active, prev_pdf, prev_delta = self._step(
+                    scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split)
+                return (sampler, ray, beta, radiance + light, active, prev_pdf, prev_delta,
+                        depth + 1, t_origin, t_direction, t_beta, t_radiance, t_pdf)
+            with dr.resume_grad():
+                ray_in = mi.Ray3f(_leaf(ray.o, t_origin), _leaf(ray.d, t_direction), ray.time,
+                                  ray.wavelengths)
+                light, ray_out, beta_out, active, pdf_out, prev_delta = self._step(
+                    scene, env, sampler, ray_in, _leaf(beta, t_beta), active,
+                    _leaf(prev_pdf, t_pdf), prev_delta, depth, split)
+                grads = dr.forward_to(light, ray_out.o, ray_out.d, beta_out, pdf_out,
+                                      flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            return (sampler, dr.detach(ray_out), dr.detach(beta_out), radiance + dr.detach(light),
+                    active, dr.detach(pdf_out), prev_delta, depth + 1,
+                    mi.Vector3f(grads[1]), mi.Vector3f(grads[2]), mi.Color3f(grads[3]),
+                    t_radiance + mi.Color3f(grads[0]), mi.Float(grads[4]))
+
+        out = dr.while_loop(state, cond, body, max_iterations=self.max_depth,
+                            mode="evaluated" if mode == "recorded" else "symbolic",
+                            label=f"abs path tracer ({mode})")
+        return out[3], (out[11] if forward else None)
+
+    def render_backward(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int,
+                        seed: int, adjoint, dispersion: str = "auto") -> mi.TensorXf:
+        """Path replay backpropagation (Vicini et al. 2021) of one view; returns the primal image.
+
+        Renders the view, asks ``adjoint(image)`` for the derivative of the loss with respect to
+        the image (a ``TensorXf`` of the image's shape; it may itself backpropagate into other
+        parameters, e.g. the sensor's), then traces every path again with the same samples and,
+        at each vertex, backpropagates the loss through what that vertex contributes: its own
+        light, and the light of the rest of the path through the vertex's sample weight. Memory
+        is the loop state's; the cost is about two primal renders.
+
+        Only derivatives that stay at their vertex are exact: BSDF and emitter values (textures,
+        reflectance, measured-BRDF tables), absorption, the environment's scale, rotation and
+        distance, subsurface spread. The replayed paths are detached, so parameters that move
+        paths (IOR, roughness, pose: ``Parameter.moves_paths``) need :meth:`render_forward`.
+        """
+        split = self._split(scene, dispersion)
+        with dr.suspend_grad():
+            sampler, ray, _ = self._camera_rays(camera, spp, seed)
+            radiance, _ = self.trace(scene, env, ray, sampler, split, "primal")
+            dr.eval(radiance)
+            image = self._film(radiance, camera.width, camera.height, spp)
+        weight = adjoint(image).array
+        sampler, ray, pixel = self._camera_rays(camera, spp, seed)
+        inv_spp = opaque(mi.Float, 1.0 / spp)
+        per_sample = mi.Color3f(*[dr.gather(mi.Float, weight, pixel * 3 + c) * inv_spp for c in range(3)])
+        self._trace_adjoint(scene, env, ray, sampler, split, radiance, per_sample)
+        return image
+
+    def _trace_adjoint(self, scene, env, ray, sampler, split, radiance, adjoint) -> None:
+        """The replay loop of :meth:`render_backward`: ``radiance`` is each path's primal value
+        and ``adjoint`` the loss's derivative with respect to it."""
+        state = (sampler, mi.Ray3f(ray), mi.Color3f(1.0), mi.Color3f(radiance), mi.Bool(True),
+                 mi.Float(1.0), mi.Bool(True), mi.UInt32(0))
+
+        def cond(sampler, ray, beta, remaining, active, *rest):
+            return active
+
+        def body(sampler, ray, beta, remaining, active, prev_pdf, prev_delta, depth):
+            with dr.resume_grad():
+                light, ray, beta_out, active, prev_pdf, prev_delta = self._step(
+                    scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split)
+                # What the rest of the path brings, and its derivative through this vertex's
+                # weight (beta_out / detach(beta_out): 1 in value, d weight / weight attached).
+                remaining = remaining - dr.detach(light)
+                value = dr.detach(beta_out)
+                relative = dr.select(value != 0.0, beta_out / dr.select(value != 0.0, value, 1.0), 0.0)
+                dr.backward_from(adjoint * (light + remaining * relative),
+                                 flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            return (sampler, dr.detach(ray), value, remaining, active, dr.detach(prev_pdf),
+                    prev_delta, depth + 1)
+
+        dr.while_loop(state, cond, body, max_iterations=self.max_depth, label="abs path replay")
 
     # --------------------------------------------------------------- private
-    def _render_pass(self, scene, env, camera, spp, seed, moving, channel) -> mi.TensorXf:
+    @staticmethod
+    def _check_moving(camera: Camera, moving) -> None:
+        if moving and camera.block > 1:
+            raise NotImplementedError("pose gradients (edge sampling) need block == 1: fit "
+                                      "poses without --downsample")
+
+    @staticmethod
+    def _split(scene: mi.Scene, dispersion: str) -> bool:
+        if dispersion not in ("auto", "split", "none"):
+            raise ValueError(f"dispersion must be 'auto', 'split' or 'none', not {dispersion!r}")
+        if dispersion != "auto":
+            return dispersion == "split"
+        glass = [s.bsdf() for s in scene.shapes() if isinstance(s.bsdf(), DielectricBSDF)]
+        return any(dr.grad_enabled(b.ior) or len({float(c[0]) for c in (b.ior.x, b.ior.y, b.ior.z)}) > 1
+                   for b in glass)
+
+    def _attached(self, scene: mi.Scene, env: Environment) -> bool:
+        """Whether any input of a render has gradients enabled (and they are not suspended)."""
+        values = [env.scale, env.rotation, env.inverse_distance, env.data]
+        values += [value for _, value in self.subsurface]
+        params = mi.traverse(scene)
+        values += [params[k] for k in params.keys()]
+        return any(dr.grad_enabled(v) for v in values)
+
+    @staticmethod
+    def _camera_rays(camera: Camera, spp: int, seed: int):
+        """The sampler and camera rays of a render: ``spp`` consecutive lanes per pixel.
+
+        Returns ``(sampler, ray, pixel)``; the same ``(camera, spp, seed)`` gives the same rays and
+        the same sampler state, which path replay relies on.
+        """
         w, h = camera.width, camera.height
         n = w * h * spp
         sampler = mi.load_dict({"type": "independent"})
-        sampler.seed(seed32(seed), n)
-        idx = dr.arange(mi.UInt32, n)
-        pixel = idx // spp
-        px = mi.Float(pixel % w)
-        py = mi.Float(pixel // w)
+        # Sizes and seeds enter kernels as memory, not literals: another spp, resolution or seed
+        # must reuse the compiled kernels.
+        sampler.seed(opaque(mi.UInt32, seed32(seed)), n)
+        pixel = dr.arange(mi.UInt32, n) // opaque(mi.UInt32, spp)
+        width = opaque(mi.UInt32, w)
+        px = mi.Float(pixel % width)
+        py = mi.Float(pixel // width)
         offset = sampler.next_2d()
         dx = mi.warp.interval_to_tent(offset.x)
         dy = mi.warp.interval_to_tent(offset.y)
         if camera.block > 1:
             # A pixel of a downsampled camera is the box average of block x block fine pixels,
             # each with its tent filter: pick a fine pixel, then a tent offset of its size.
-            if moving:
-                raise NotImplementedError("pose gradients (edge sampling) need block == 1: fit "
-                                          "poses without --downsample")
-            b = camera.block
+            b = opaque(mi.Float, camera.block)
             pick = dr.floor(sampler.next_2d() * b)
             dx = (pick.x - (b - 1) / 2 + dx) / b
             dy = (pick.y - (b - 1) / 2 + dy) / b
         origin, d = camera.rays(px + dx, py + dy)
-        # The ray time carries the colour channel of this pass to abs_dielectric (see there).
-        ray = mi.Ray3f(origin, d, float(channel), mi.Color0f())
-        radiance = self._trace(scene, env, ray, sampler)
+        return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel
+
+    def _render_pass(self, scene, env, camera, spp, seed, split, mode):
+        sampler, ray, _ = self._camera_rays(camera, spp, seed)
+        radiance, tangent = self.trace(scene, env, ray, sampler, split, mode)
+        # Evaluate all channels in one launch: reducing channel by channel from the unevaluated
+        # loop would run the whole path-tracing kernel once per channel.
+        dr.eval(radiance, tangent)
+        w, h = camera.width, camera.height
+        images = [self._film(radiance, w, h, spp)]
+        images.append(self._film(tangent, w, h, spp) if tangent is not None else None)
+        return images
+
+    @staticmethod
+    def _film(radiance: mi.Color3f, w: int, h: int, spp: int) -> mi.TensorXf:
         # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
-        values = [dr.block_sum(c, spp) / spp for c in (radiance.x, radiance.y, radiance.z)]
+        inv_spp = opaque(mi.Float, 1.0 / spp)
+        values = [dr.block_sum(c, spp) * inv_spp for c in (radiance.x, radiance.y, radiance.z)]
         flat = dr.zeros(mi.Float, w * h * 3)
         lane = dr.arange(mi.UInt32, w * h)
         for c in range(3):
             dr.scatter(flat, values[c], lane * 3 + c)
-        image = mi.TensorXf(flat, (h, w, 3))
-        if moving:
-            image = image + boundary_term(self, scene, env, camera, moving,
-                                          n_samples=2 * spp * (w + h), seed=seed, channel=channel)
-        return image
+        return mi.TensorXf(flat, (h, w, 3))
 
-    def _trace(self, scene, env: Environment, ray: mi.Ray3f, sampler: mi.Sampler) -> mi.Color3f:
+    def _step(self, scene, env: Environment, sampler, ray, beta, active, prev_pdf, prev_delta,
+              depth, split):
+        """One path vertex: light reaching the camera from it, and the continued path.
+
+        Returns ``(light, ray, beta, active, prev_pdf, prev_delta)``.
+        """
         ctx = mi.BSDFContext()
-        result = mi.Color3f(0.0)
-        beta = mi.Color3f(1.0)
-        active = mi.Bool(True)
-        prev_pdf = mi.Float(1.0)
-        prev_delta = mi.Bool(True)
-        for depth in range(self.max_depth):
-            si = scene.ray_intersect(ray, mi.RayFlags.All, depth == 0, active)
-            escaped = active & ~si.is_valid()
-            mis = dr.select(prev_delta, 1.0, _mis_power(prev_pdf, env.pdf(ray.d, escaped)))
-            result += dr.select(escaped, beta * env.eval(ray.d, escaped, ray.o) * mis, 0.0)
-            active &= si.is_valid()
-            if depth + 1 >= self.max_depth:
-                break
-            if self.subsurface:
-                si, score = self._spread(scene, si, ray, sampler, active)
-                beta *= score
-            bsdf = si.bsdf(ray)
+        light = mi.Color3f(0.0)
+        si = scene.ray_intersect(ray, mi.RayFlags.All, depth == 0, active)
+        escaped = active & ~si.is_valid()
+        mis = dr.select(prev_delta, 1.0, _mis_power(prev_pdf, env.pdf(ray.d, escaped)))
+        light += dr.select(escaped, beta * env.eval(ray.d, escaped, ray.o) * mis, 0.0)
+        active = active & si.is_valid() & (depth + 1 < self.max_depth)
+        if self.subsurface:
+            si, score = self._spread(scene, si, ray, sampler, active)
+            beta = beta * score
+        bsdf = si.bsdf(ray)
+        channel = mi.UInt32(ray.time)
+        if split:
+            # The first dispersive glass a path meets picks the one channel it carries on with.
+            glass = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.DeltaTransmission) & \
+                (channel == _ALL_CHANNELS)
+            chosen = dr.minimum(mi.UInt32(3.0 * sampler.next_1d(glass)), 2)
+            channel = dr.select(glass, chosen, channel)
+            keep = mi.Color3f(*[dr.select(channel == c, 3.0, 0.0) for c in range(3)])
+            beta = dr.select(glass, beta * keep, beta)
+        si.time = mi.Float(channel)
 
-            # Next-event estimation towards the environment (smooth lobes only).
-            smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            d_light, pdf_light = env.sample(sampler.next_2d(smooth), smooth)
-            visible = smooth & (pdf_light > 0.0) & ~scene.ray_test(si.spawn_ray(d_light), smooth)
-            f, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(d_light), visible)
-            contribution = beta * f * env.eval(d_light, visible, si.p) * \
-                _mis_power(pdf_light, pdf_bsdf) / dr.select(visible, pdf_light, 1.0)
-            result += dr.select(visible, contribution, 0.0)
+        # Next-event estimation towards the environment (smooth lobes only).
+        smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        d_light, pdf_light = env.sample(sampler.next_2d(smooth), smooth)
+        visible = smooth & (pdf_light > 0.0) & ~scene.ray_test(si.spawn_ray(d_light), smooth)
+        f, pdf_bsdf = bsdf.eval_pdf(ctx, si, si.to_local(d_light), visible)
+        contribution = beta * f * env.eval(d_light, visible, si.p) * \
+            _mis_power(pdf_light, pdf_bsdf) / dr.select(visible, pdf_light, 1.0)
+        light += dr.select(visible, contribution, 0.0)
 
-            # Continue the path with an attached BSDF sample.
-            bs, weight = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
-            beta *= dr.select(active, weight, 0.0)
-            prev_pdf = bs.pdf
-            prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-            ray = si.spawn_ray(si.to_world(bs.wo))
-            active &= (bs.pdf > 0.0) & (dr.max(dr.detach(beta)) > 0.0)
+        # Continue the path with an attached BSDF sample.
+        bs, weight = bsdf.sample(ctx, si, sampler.next_1d(active), sampler.next_2d(active), active)
+        beta = beta * dr.select(active, weight, 0.0)
+        prev_pdf = bs.pdf
+        prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        ray = si.spawn_ray(si.to_world(bs.wo))
+        active &= (bs.pdf > 0.0) & (dr.max(dr.detach(beta)) > 0.0)
 
-            if depth + 1 >= self.rr_depth:
-                q = dr.minimum(dr.max(dr.detach(beta)), 0.95)
-                survive = sampler.next_1d(active) < q
-                beta = dr.select(survive, beta / dr.select(q > 0.0, q, 1.0), 0.0)
-                active &= survive
-        return result
+        roulette = active & (depth + 1 >= self.rr_depth)
+        q = dr.minimum(dr.max(dr.detach(beta)), 0.95)
+        survive = sampler.next_1d(roulette) < q
+        beta = dr.select(roulette, dr.select(survive, beta / dr.select(q > 0.0, q, 1.0), 0.0), beta)
+        active &= ~roulette | survive
+        return light, ray, beta, active, prev_pdf, prev_delta
 
     def _spread(self, scene, si, ray, sampler, active):
         """Move the shading point of surfaces with subsurface spread.

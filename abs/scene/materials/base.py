@@ -36,6 +36,10 @@ class ParameterSpec:
     mitsuba_key : str or None
         Suffix of the Mitsuba parameter key below the material's id (``"ior"`` -> ``glass.ior``).
         ``None`` when the material computes the Mitsuba value itself (see :meth:`Material.apply`).
+    moves_paths : bool
+        Whether the field changes where light goes (a refractive index, a roughness), not only
+        how much of it: its derivatives need attached paths (forward mode), and path replay
+        cannot give them (see :meth:`abs.render.PathTracer.render_backward`).
     """
 
     field: str
@@ -44,6 +48,7 @@ class ParameterSpec:
     lower: float
     upper: float
     mitsuba_key: str | None
+    moves_paths: bool = False
 
 
 class Material(ABC):
