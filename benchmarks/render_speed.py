@@ -1,81 +1,264 @@
-"""Render and render+gradient time of the default scene at two resolutions.
+"""abs's renderer against plain Mitsuba, measured in one run: compile, speed, derivatives, memory.
 
-Prints a table and writes ``benchmarks/results/render_speed.json``. Times are the median of
-``--repeats`` runs after one warm-up run (which compiles the kernels); Dr.Jit launches are
-asynchronous, so every timing reads the result back.
+Every figure is a ratio to Mitsuba 3's own ``path`` integrator on the same scene, measured in the
+same run on the same machine (absolute seconds are printed beside). Rows:
 
-    python benchmarks/render_speed.py [--spp 16] [--repeats 3]
+- **compile**: the first render of a view, each in a fresh process with an empty Dr.Jit kernel
+  cache (what a new user waits for), abs against Mitsuba's first ``path`` render; for the default
+  scene and for a scene with ``merl`` and ``brdf_pca`` materials.
+- **primal**: samples per second once compiled, with one scalar IOR (Mitsuba's ``dielectric``).
+- **dispersion**: distinct IORs per channel. abs splits a path at the first dispersive glass it
+  meets (one channel per path onwards); the alternative is one full render per channel. Compared
+  at equal noise: efficiency = 1 / (pixel variance x time), variance from independent seeds.
+- **derivatives**: a forward-mode Jacobian column and a path-replay gradient, in primal renders.
+- **memory**: peak resident memory of a gradient (path replay) and of a Jacobian column on a
+  640x480 view at 1, 16 and 256 spp, each in a fresh process, above the process's footprint
+  after compiling the scene.
+
+    python benchmarks/render_speed.py [--quick]
+
+Writes ``benchmarks/results/render_speed.json`` and prints the table the README shows.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
+import subprocess
+import sys
+import tempfile
+import textwrap
 import time
 from pathlib import Path
 
-import drjit as dr
-import mitsuba as mi
-import numpy as np
-
-from abs.render import Camera, compile_scene
-from abs.scene import load_scene
-from abs.simulate import place_cameras
-
 ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_SCENE = ROOT / "scenes/default/scene.toml"
+
+# Run in a child process: one measurement, printed as JSON on the last line.
+_CHILD = textwrap.dedent('''
+    import json, resource, sys, time
+    import numpy as np
+    import abs.render
+    import drjit as dr, mitsuba as mi
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+    from abs.simulate import place_cameras
+
+    task, scene_path, width, height, spp = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+    compiled = compile_scene(load_scene(scene_path))
+    view = place_cameras(compiled, 1, width, height)[0]
+    camera = Camera(view["K"], view["R"], view["t"], width, height)
+    rss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    out = {}
+    if task == "abs_first":
+        start = time.perf_counter(); compiled.render(camera, spp=spp).numpy()
+        out["seconds"] = time.perf_counter() - start
+    elif task == "mitsuba_first":
+        sys.path.insert(0, sys.argv[6]); from render_speed import mitsuba_scene
+        scene = mitsuba_scene(compiled, view, width, height, ior=None)
+        start = time.perf_counter(); np.array(mi.render(scene, spp=spp))
+        out["seconds"] = time.perf_counter() - start
+    else:  # memory of a derivative render
+        compiled.render(camera, spp=1).numpy()  # the scene and a small render: the footprint
+        base = rss()
+        if task == "gradient":
+            compiled.render_backward(camera, np.ones((height, width, 3)), ["glass.absorption"], spp=spp)
+        else:
+            compiled.render_forward(camera, {"glass.absorption": [1.0, 0.0, 0.0]}, spp=spp)
+        out["base_mb"], out["peak_mb"] = base, rss()
+    print(json.dumps(out))
+''')
 
 
-def _time(fn, repeats: int) -> float:
-    fn()
+def mitsuba_scene(compiled, view, width, height, ior):
+    """Plain Mitsuba's version of a compiled scene seen from ``view``: stock ``dielectric`` glass
+    (one IOR: ``ior``, or the green channel's), ``envmap``, ``path`` integrator, tent filter."""
+    import mitsuba as mi
+    import numpy as np
+
+    d = compiled.mitsuba_dict()
+    for name, material in compiled.scene.materials.items():
+        if material.type_name == "dielectric":
+            value = float(material.ior_rgb[1] if ior is None else ior)
+            d[name] = {"type": "dielectric", "int_ior": value, "ext_ior": 1.0, "id": name}
+    d["integrator"] = {"type": "path", "max_depth": compiled.scene.render.max_depth}
+    R, t, K = (np.asarray(view[k], float) for k in ("R", "t", "K"))
+    to_world = np.eye(4)
+    to_world[:3, :3] = R.T @ np.diag([-1.0, -1.0, 1.0])  # OpenCV camera axes -> Mitsuba's
+    to_world[:3, 3] = -R.T @ t
+    d["sensor"] = {"type": "perspective", "fov": float(np.degrees(2 * np.arctan(height / 2 / K[1, 1]))),
+                   "fov_axis": "y", "to_world": mi.ScalarTransform4f(to_world),
+                   "film": {"type": "hdrfilm", "width": width, "height": height,
+                            "rfilter": {"type": "tent"}, "pixel_format": "rgb"}}
+    return mi.load_dict(d, optimize=False)
+
+
+def _child(task: str, scene: Path, width: int, height: int, spp: int) -> dict:
+    env = {**os.environ, "DRJIT_CACHE_DIR": tempfile.mkdtemp(prefix="drjit-cache-")}
+    result = subprocess.run([sys.executable, "-c", _CHILD, task, str(scene), str(width), str(height),
+                             str(spp), str(Path(__file__).parent)],
+                            capture_output=True, text=True, env=env, check=True)
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def _time(fn, repeats: int = 3) -> float:
+    fn()  # compile
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
         fn()
         times.append(time.perf_counter() - start)
-    return float(np.median(times))
+    return float(min(times))
+
+
+def measured_material_scene(folder: Path) -> Path:
+    """The default scene with the cloth as a ``merl`` table and the backdrop as ``brdf_pca``."""
+    import numpy as np
+
+    from abs.brdf.basis import BRDFBasis
+    from abs.io.merl import MERL_SHAPE, MERL_SIZE, merl_sample_angles, write_merl
+
+    theta_h = merl_sample_angles()[0]
+    lobe = np.exp(-np.square(theta_h / 0.2))  # a glossy highlight over a diffuse base, 1/sr
+    table = (np.array([0.18, 0.15, 0.12])[:, None, None, None] / np.pi + 0.5 * lobe[None]).astype(np.float32)
+    write_merl(folder / "cloth.binary", table.reshape(MERL_SHAPE))
+    rng = np.random.default_rng(0)
+    BRDFBasis(mean=np.zeros(MERL_SIZE, np.float32),
+              components=(rng.normal(size=(4, MERL_SIZE)) * 0.1).astype(np.float32),
+              median=np.full(MERL_SIZE, 0.15, np.float32), epsilon=1e-3).save(folder / "basis.npz")
+    text = DEFAULT_SCENE.read_text()
+    for asset in ("env.exr", "sphere.ply", "cloth.ply", "backdrop.ply"):
+        (folder / asset).write_bytes((DEFAULT_SCENE.parent / asset).read_bytes())
+    text = text.replace('type = "diffuse"\nreflectance = [0.8, 0.8, 0.78]   # white cotton, very slightly warm',
+                        'type = "merl"\nfile = "cloth.binary"')
+    text = text.replace('type = "diffuse"\nreflectance = "checkerboard.png" # sRGB texture: 3 cm squares, grey 0.3 / white 0.8 linear',
+                        'type = "brdf_pca"\nbasis = "basis.npz"\ncoefficients = [0.2, -0.1, 0.0, 0.1]')
+    assert 'type = "merl"' in text and 'type = "brdf_pca"' in text
+    (folder / "scene.toml").write_text(text)
+    return folder / "scene.toml"
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--spp", type=int, default=16)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--sizes", default="64x48,128x96")
+    parser.add_argument("--quick", action="store_true", help="smaller images and no 256-spp memory row")
     args = parser.parse_args()
-    compiled = compile_scene(load_scene(ROOT / "scenes/default/scene.toml"))
-    rows = []
-    for size in args.sizes.split(","):
-        w, h = map(int, size.split("x"))
-        view = place_cameras(compiled, 1, w, h)[0]
-        camera = Camera(view["K"], view["R"], view["t"], w, h)
 
-        def render():
-            compiled.render(camera, spp=args.spp).numpy()
+    import drjit as dr
+    import mitsuba as mi
+    import numpy as np
 
-        def render_grad():
-            x = mi.Float(compiled.get("glass.absorption").astype(np.float32))
-            dr.enable_grad(x)
-            compiled.set("glass.absorption", x)
-            dr.backward(dr.mean(compiled.render(camera, spp=args.spp), axis=None))
-            dr.grad(x).numpy()
-            compiled.set("glass.absorption", dr.detach(x))
+    from abs.render import Camera, compile_scene
+    from abs.render.integrator import PathTracer
+    from abs.scene import load_scene
+    from abs.simulate import place_cameras
 
-        t_render, t_grad = _time(render, args.repeats), _time(render_grad, args.repeats)
-        rows.append({"width": w, "height": h, "spp": args.spp, "render_s": t_render,
-                     "render_and_gradient_s": t_grad, "gradient_over_render": t_grad / t_render})
-    print(f"{'size':>9} {'spp':>4} {'render s':>9} {'render+grad s':>14} {'ratio':>6}")
-    for r in rows:
-        print(f"{r['width']:>4}x{r['height']:<4} {r['spp']:>4} {r['render_s']:>9.3f} "
-              f"{r['render_and_gradient_s']:>14.3f} {r['gradient_over_render']:>6.2f}")
-    big, small = rows[-1], rows[0]
-    print(f"time ratio {big['width']}x{big['height']} / {small['width']}x{small['height']}: "
-          f"render {big['render_s'] / small['render_s']:.2f}, "
-          f"render+grad {big['render_and_gradient_s'] / small['render_and_gradient_s']:.2f}")
+    record: dict = {"variant": None, "machine": platform.machine(), "cpu_count": os.cpu_count()}
+    w, h = (100, 75) if args.quick else (200, 150)
+
+    # ---- compile: fresh processes, empty kernel caches
+    compile_rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        scenes = {"default": DEFAULT_SCENE, "merl+brdf_pca": measured_material_scene(Path(tmp))}
+        sizes = [(w, h)] if args.quick else [(w, h), (640, 480)]
+        for label, scene in scenes.items():
+            for sw, sh in sizes:
+                ours = _child("abs_first", scene, sw, sh, 16)["seconds"]
+                theirs = _child("mitsuba_first", scene, sw, sh, 16)["seconds"]
+                compile_rows.append({"scene": label, "width": sw, "height": sh, "spp": 16,
+                                     "abs_first_render_s": ours, "mitsuba_first_render_s": theirs,
+                                     "ratio": ours / theirs})
+                print(f"compile {label:14s} {sw}x{sh}: abs {ours:6.2f} s, mitsuba {theirs:6.2f} s, "
+                      f"ratio {ours / theirs:.2f}", flush=True)
+    record["compile"] = compile_rows
+
+    # ---- primal speed, dispersion, derivatives (this process)
+    compiled = compile_scene(load_scene(DEFAULT_SCENE))
+    record["variant"] = mi.variant()
+    view = place_cameras(compiled, 1, w, h)[0]
+    camera = Camera(view["K"], view["R"], view["t"], w, h)
+    spp = 64
+    distinct = compiled.get("glass.ior")
+    scalar = float(distinct[1])
+    compiled.set("glass.ior", [scalar] * 3)
+    mitsuba = mitsuba_scene(compiled, view, w, h, ior=scalar)
+    t_abs = _time(lambda: compiled.render(camera, spp=spp).numpy())
+    t_mi = _time(lambda: np.array(mi.render(mitsuba, spp=spp)))
+    samples = w * h * spp
+    record["primal"] = {"width": w, "height": h, "spp": spp, "abs_s": t_abs, "mitsuba_s": t_mi,
+                        "abs_samples_per_s": samples / t_abs, "mitsuba_samples_per_s": samples / t_mi,
+                        "speed_ratio": t_mi / t_abs}
+    print(f"primal {w}x{h} {spp} spp, scalar IOR: abs {t_abs:.3f} s, mitsuba {t_mi:.3f} s, "
+          f"samples/s ratio {t_mi / t_abs:.2f}", flush=True)
+
+    # Dispersion: split paths (abs) against one render per channel, at equal noise.
+    compiled.set("glass.ior", distinct)
+    tracer = PathTracer(max_depth=compiled.scene.render.max_depth)
+    scene, env = compiled.mitsuba_scene, compiled.environment
+
+    def per_channel(seed: int) -> np.ndarray:
+        image = np.zeros((h, w, 3))
+        for c in range(3):
+            sampler, ray, _ = tracer._camera_rays(camera, spp, seed * 3 + c)
+            ray.time = mi.Float(float(c))  # the whole path carries channel c
+            radiance, _ = tracer.trace(scene, env, ray, sampler, split=False)
+            dr.eval(radiance)
+            image[..., c] = tracer._film(radiance, w, h, spp).numpy()[..., c]
+        return image
+
+    def split(seed: int) -> np.ndarray:
+        return tracer.render(scene, env, camera, spp, seed).numpy()
+
+    dispersion = {}
+    for label, fn in (("split", split), ("per_channel", per_channel)):
+        seconds = _time(lambda: fn(100))
+        renders = [fn(s) for s in range(4)]
+        variance = float(np.mean(np.var(np.stack(renders), axis=0, ddof=1)))
+        dispersion[label] = {"seconds": seconds, "pixel_variance": variance,
+                             "efficiency": 1.0 / (variance * seconds)}
+    dispersion["split_over_per_channel_efficiency"] = (dispersion["split"]["efficiency"]
+                                                       / dispersion["per_channel"]["efficiency"])
+    record["dispersion"] = dispersion
+    print(f"dispersion: split {dispersion['split']['seconds']:.3f} s var {dispersion['split']['pixel_variance']:.3g}; "
+          f"per channel {dispersion['per_channel']['seconds']:.3f} s var {dispersion['per_channel']['pixel_variance']:.3g}; "
+          f"efficiency ratio {dispersion['split_over_per_channel_efficiency']:.2f}", flush=True)
+
+    # Derivatives, in primal renders of the same view and spp (distinct IORs: dispersive glass).
+    spp_d = 16
+    t_primal = _time(lambda: compiled.render(camera, spp=spp_d).numpy())
+    t_column = _time(lambda: compiled.render_forward(camera, {"glass.ior": [1.0, 0.0, 0.0],
+                                                              "glass.absorption": [0.0, 0.0, 0.0]},
+                                                     spp=spp_d)[1].numpy())
+    weights = np.random.default_rng(0).uniform(-1, 1, (h, w, 3))
+    t_gradient = _time(lambda: compiled.render_backward(camera, weights, ["glass.absorption",
+                                                                          "environment.scale"], spp=spp_d))
+    record["derivatives"] = {"width": w, "height": h, "spp": spp_d, "primal_s": t_primal,
+                             "jacobian_column_s": t_column, "gradient_s": t_gradient,
+                             "jacobian_column_over_primal": t_column / t_primal,
+                             "gradient_over_primal": t_gradient / t_primal}
+    print(f"derivatives {w}x{h} {spp_d} spp: primal {t_primal:.3f} s, Jacobian column "
+          f"{t_column / t_primal:.2f}x, gradient {t_gradient / t_primal:.2f}x", flush=True)
+
+    # ---- memory: fresh processes, 640x480
+    memory = []
+    for task in ("gradient", "jacobian_column"):
+        for n in ((1, 16) if args.quick else (1, 16, 256)):
+            m = _child(task, DEFAULT_SCENE, 640, 480, n)
+            memory.append({"task": task, "spp": n, "width": 640, "height": 480,
+                           "footprint_mb": m["base_mb"], "peak_mb": m["peak_mb"],
+                           "growth_mb": m["peak_mb"] - m["base_mb"]})
+            print(f"memory {task:15s} 640x480 {n:4d} spp: +{m['peak_mb'] - m['base_mb']:.0f} MB "
+                  f"(footprint {m['base_mb']:.0f} MB)", flush=True)
+    record["memory"] = memory
+    record["gpu"] = "not measured: no CUDA device was available to this run" \
+        if not mi.variant().startswith("cuda") else mi.variant()
+
     out = ROOT / "benchmarks/results"
     out.mkdir(parents=True, exist_ok=True)
-    record = {"variant": mi.variant(), "machine": platform.machine(), "rows": rows}
-    (out / "render_speed.json").write_text(json.dumps(record, indent=2))
-    print(f"saved {out / 'render_speed.json'}")
+    name = "render_speed_quick.json" if args.quick else "render_speed.json"
+    (out / name).write_text(json.dumps(record, indent=2))
+    print(f"saved {out / name}")
 
 
 if __name__ == "__main__":

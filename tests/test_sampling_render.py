@@ -152,5 +152,7 @@ def test_dask_workers_evaluate_the_same_posterior(glass_scene_dir, capture):
         with evaluation_pool(scheduler=client) as pool:
             remote = pool.map(posterior, positions)
     assert remote[2] == -np.inf and local[2] == -np.inf
-    np.testing.assert_allclose(remote[:2], local[:2], rtol=1e-9)
+    # Equal up to float32 round-off of the renders (parallel reductions may change the last bit
+    # of a pixel, see conftest.assert_same_rendering): a different posterior differs by far more.
+    np.testing.assert_allclose(remote[:2], local[:2], rtol=1e-6)
     assert local[1] > local[0]  # the truth (scale 1) is more probable than 0.9

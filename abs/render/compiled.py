@@ -254,6 +254,36 @@ class CompiledScene:
             dr.eval(image)
         return image
 
+    def _push_tangents(self, tangents: dict) -> list:
+        """Set every named parameter to an attached leaf holding its tangent, and push the tangents
+        into the scene's members (BSDF fields, vertex positions, ...), cutting the edges that led
+        there: the path loop reads those members inside its own AD scope, which may not reach back
+        across edges made outside it."""
+        leaves = []
+        for name, tangent in tangents.items():
+            spec = self._spec(name)
+            value = from_numpy(mi.Float, self.get(name))
+            dr.enable_grad(value)
+            self.set(name, value)
+            tangent = np.asarray(tangent, np.float32).ravel()
+            if tangent.size != dr.width(value):
+                raise ValueError(f"{name}: tangent has {tangent.size} values, the parameter {spec.size}")
+            dr.set_grad(value, from_numpy(mi.Float, tangent))
+            leaves.append(value)
+        dr.enqueue(dr.ADMode.Forward, leaves)
+        dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges)
+        return leaves
+
+    def _through_sensor_forward(self, camera: Camera, image, derivative):
+        """The sensor applied to an image and its derivative (the sensor's own tangents added)."""
+        with dr.resume_grad():
+            radiance = mi.TensorXf(image)
+            dr.enable_grad(radiance)
+            dr.set_grad(radiance, derivative)
+            recorded = self.sensor.apply(radiance, camera)
+            derivative = dr.forward_to(recorded, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+        return dr.detach(recorded), mi.TensorXf(derivative)
+
     def render_forward(self, camera: Camera, tangents: dict, spp: int | None = None, seed: int = 0,
                        max_depth: int | None = None) -> tuple[mi.TensorXf, mi.TensorXf]:
         """A rendering and its derivative along ``tangents``, by forward mode inside the path loop.
@@ -267,27 +297,12 @@ class CompiledScene:
         Returns
         -------
         image, derivative : TensorXf, shape (height, width, 3)
-            Detached; ``derivative`` is ``sum_k d image / d p_k * tangent_k``, with the silhouette
-            boundary term of moving objects included. The same ``seed`` gives the same samples as
-            :meth:`render` (common random numbers) when no dispersive glass is being differentiated.
+            Detached; ``derivative`` is ``sum_k d image / d p_k * tangent_k``. The same ``seed``
+            gives the same samples as :meth:`render` (common random numbers) when no dispersive
+            glass is being differentiated.
         """
-        leaves = []
-        for name, tangent in tangents.items():
-            spec = self._spec(name)
-            value = from_numpy(mi.Float, self.get(name))
-            dr.enable_grad(value)
-            self.set(name, value)
-            tangent = np.asarray(tangent, np.float32).ravel()
-            if tangent.size != dr.width(value):
-                raise ValueError(f"{name}: tangent has {tangent.size} values, the parameter {spec.size}")
-            dr.set_grad(value, from_numpy(mi.Float, tangent))
-            leaves.append(value)
+        self._push_tangents(tangents)
         try:
-            # Push the tangents into the scene's members (BSDF fields, vertex positions, ...) and
-            # cut the edges that led there: the path loop reads those members inside its own AD
-            # scope, which may not reach back across edges outside it.
-            dr.enqueue(dr.ADMode.Forward, leaves)
-            dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges)
             tracer = self._tracer(max_depth)
             spp = spp or self.scene.render.spp
             batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
@@ -300,17 +315,10 @@ class CompiledScene:
                 image = part * share if image is None else image + part * share
                 derivative = d_part * share if derivative is None else derivative + d_part * share
                 dr.eval(image, derivative)
-            with dr.resume_grad():
-                radiance = mi.TensorXf(image)
-                dr.enable_grad(radiance)
-                dr.set_grad(radiance, derivative)
-                recorded = self.sensor.apply(radiance, camera)
-                derivative = dr.forward_to(recorded, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
-            return dr.detach(recorded), mi.TensorXf(derivative)
+            return self._through_sensor_forward(camera, image, derivative)
         finally:
             for name in tangents:
                 self.set(name, from_numpy(mi.Float, self.get(name)))
-
 
     def render_backward(self, camera: Camera, weight, names, spp: int | None = None, seed: int = 0,
                         max_depth: int | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:

@@ -1,0 +1,114 @@
+"""Plain-language checks of a finished fit: the signs that it failed, said where a user looks.
+
+A least-squares fit always returns numbers. These checks read the fit's own summary for the signs
+that those numbers are not a solution: a direction the photographs do not constrain (the Laplace
+curvature is singular there), a parameter pinned at a bound or outside the range its material can
+physically have (a glass IOR of 2.18 is no glass; a fit there found a wrong basin), two parameters
+that trade off almost perfectly, and a holdout residual that stays far above the photographs'
+noise (the model leaves out physics, or the fit stopped in a wrong minimum). They are written to
+``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the report, as
+:mod:`abs.sampling.checks` does for posteriors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+__all__ = ["run_checks", "PLAUSIBLE_RANGES", "HOLDOUT_NOISE_FACTOR", "TRADE_OFF_CORRELATION"]
+
+#: Physically plausible values by ``(material type, field)``: what real materials of that type
+#: have. A fit outside them has almost surely found a wrong basin. Glass IORs: optical and
+#: soda-lime glasses in the visible (refractiveindex.info: fused silica 1.46 to dense flints
+#: 1.8); absorption of clear to strongly tinted glass, 1/m.
+PLAUSIBLE_RANGES: dict[tuple[str, str], tuple[float, float]] = {
+    ("dielectric", "ior"): (1.45, 1.8),
+    ("dielectric", "absorption"): (0.0, 200.0),
+}
+
+#: Holdout RMSE above this many times the photographs' own noise: the model does not explain the
+#: views it was not fitted to.
+HOLDOUT_NOISE_FACTOR = 3.0
+
+#: |correlation| above which two parameters are said to trade off.
+TRADE_OFF_CORRELATION = 0.98
+
+# A value this close to a bound (relative to the bound's scale) counts as "at" it.
+_AT_BOUND = 1e-3
+
+
+def _at_bound(value: float, lower: float, upper: float) -> str | None:
+    for bound, word in ((lower, "lower"), (upper, "upper")):
+        if np.isfinite(bound) and abs(value - bound) <= _AT_BOUND * max(1.0, abs(bound)):
+            return f"{word} bound {bound:g}"
+    return None
+
+
+def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
+               kinds: Mapping[str, tuple[str, str]] | None = None) -> list[str]:
+    """Warnings about a finished fit, each a short message a user can act on.
+
+    Parameters
+    ----------
+    summary : mapping
+        The fit's ``fit.json`` content (``parameters`` with ``value`` and ``stderr``,
+        ``correlation``, ``holdout_rmse``, ``train_rmse``, ``image_noise``).
+    bounds : mapping
+        Parameter name to its physical ``(lower, upper)`` bounds.
+    kinds : mapping, optional
+        Parameter name to ``(material type, field)`` for the plausibility ranges.
+
+    Returns
+    -------
+    list of str
+        Empty when nothing is wrong that these checks can see.
+    """
+    checks = []
+    kinds = kinds or {}
+    for name, entry in summary["parameters"].items():
+        values = np.atleast_1d(np.asarray(entry["value"], float))
+        stderr = entry.get("stderr") or [None] * len(values)
+        loose = [i for i, s in enumerate(stderr) if s is None]
+        if loose:
+            which = "every component" if len(loose) == len(values) else f"component(s) {loose}"
+            checks.append(
+                f"{name}: the photographs do not constrain {which} (the curvature of the fit is "
+                "singular there), so no standard error can be given and the value is not "
+                "determined by the data. Fit fewer parameters (tie per-channel values), add views "
+                "that show the effect, or give a prior.")
+        lower, upper = bounds.get(name, (-np.inf, np.inf))
+        for i, v in enumerate(values):
+            hit = _at_bound(float(v), lower, upper)
+            if hit:
+                checks.append(f"{name}[{i}] = {v:.4g} sits at its {hit}: the optimum lies at or "
+                              "beyond it, so the value and its error mean little.")
+        plausible = PLAUSIBLE_RANGES.get(kinds.get(name, ("", "")))
+        if plausible is not None:
+            outside = [(i, v) for i, v in enumerate(values) if not plausible[0] <= v <= plausible[1]]
+            if outside:
+                listed = ", ".join(f"{v:.4g}" for _, v in outside)
+                checks.append(
+                    f"{name} = {listed} is outside what a real {kinds[name][0]} has "
+                    f"({plausible[0]:g} to {plausible[1]:g}): the fit most likely found a wrong "
+                    "basin. Start closer (abs glass rgb gives physical values), tie the channels, "
+                    "or fit at a coarser resolution first.")
+    corr = summary.get("correlation") or {}
+    labels, matrix = corr.get("names", []), corr.get("matrix", [])
+    for i in range(len(labels)):
+        for j in range(i + 1, len(labels)):
+            c = matrix[i][j]
+            if c is not None and abs(c) > TRADE_OFF_CORRELATION:
+                checks.append(f"{labels[i]} and {labels[j]} trade off (correlation {c:+.3f}): the "
+                              "photographs cannot tell them apart; their individual values are "
+                              "uncertain far beyond their standard errors' look.")
+    noise = summary.get("image_noise")
+    holdout = (summary.get("holdout_rmse") or {}).get("after")
+    reference, where = (holdout, "holdout") if holdout is not None else \
+        ((summary.get("train_rmse") or {}).get("after"), "training")
+    if noise and reference is not None and reference > HOLDOUT_NOISE_FACTOR * noise:
+        checks.append(
+            f"The {where} RMSE after the fit ({reference:.3g}) is {reference / noise:.1f} times the "
+            f"photographs' noise ({noise:.3g}): the model does not explain the photographs. "
+            "Physics may be missing (try abs diagnose), or the fit stopped in a wrong minimum.")
+    return checks
