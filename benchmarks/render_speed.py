@@ -12,8 +12,8 @@ same run on the same machine (absolute seconds are printed beside). Rows:
   at equal noise: efficiency = 1 / (pixel variance x time), variance from independent seeds.
 - **derivatives**: a forward-mode Jacobian column and a path-replay gradient, in primal renders.
 - **memory**: peak resident memory of a gradient (path replay) and of a Jacobian column on a
-  640x480 view at 1, 16 and 256 spp, each in a fresh process, above the process's footprint
-  after compiling the scene.
+  640x480 view at 1, 16 and 256 spp, each in a fresh process (empty kernel cache, so the growth
+  includes compiling the kernels), above the process's footprint after compiling the scene.
 
     python benchmarks/render_speed.py [--quick]
 
@@ -60,8 +60,7 @@ _CHILD = textwrap.dedent('''
         scene = mitsuba_scene(compiled, view, width, height, ior=None)
         start = time.perf_counter(); np.array(mi.render(scene, spp=spp))
         out["seconds"] = time.perf_counter() - start
-    else:  # memory of a derivative render
-        compiled.render(camera, spp=1).numpy()  # the scene and a small render: the footprint
+    else:  # memory of a derivative render, above the compiled scene's footprint
         base = rss()
         if task == "gradient":
             compiled.render_backward(camera, np.ones((height, width, 3)), ["glass.absorption"], spp=spp)
@@ -96,10 +95,11 @@ def mitsuba_scene(compiled, view, width, height, ior):
 
 
 def _child(task: str, scene: Path, width: int, height: int, spp: int) -> dict:
-    env = {**os.environ, "DRJIT_CACHE_DIR": tempfile.mkdtemp(prefix="drjit-cache-")}
-    result = subprocess.run([sys.executable, "-c", _CHILD, task, str(scene), str(width), str(height),
-                             str(spp), str(Path(__file__).parent)],
-                            capture_output=True, text=True, env=env, check=True)
+    with tempfile.TemporaryDirectory(prefix="drjit-cache-") as cache:
+        env = {**os.environ, "DRJIT_CACHE_DIR": cache}
+        result = subprocess.run([sys.executable, "-c", _CHILD, task, str(scene), str(width),
+                                 str(height), str(spp), str(Path(__file__).parent)],
+                                capture_output=True, text=True, env=env, check=True)
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 

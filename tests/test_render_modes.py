@@ -57,3 +57,22 @@ def test_replay_refuses_parameters_that_move_paths(scene):
         compiled.render_backward(camera, weights, ["glass.ior"], spp=1)
     # The scene is left as it was.
     assert not np.isnan(compiled.render(camera, spp=1).numpy()).any()
+
+
+@pytest.mark.parametrize("name", ["glass.absorption", "glass.ior", "cloth.reflectance"])
+def test_separable_channels_share_one_forward_render(scene, name):
+    """Channel c of the derivative along (1, 1, 1) is the derivative along e_c: the fits render
+    one Jacobian pass for all three channels of such a parameter (FitProblem.column_passes)."""
+    compiled, camera, _ = scene
+    assert compiled.specs[name].separable_channels
+    others = {"glass.ior": np.zeros(3)} if name != "glass.ior" else {}  # the same paths in each
+    _, together = compiled.render_forward(camera, {name: np.ones(3), **others}, spp=SPP, seed=2,
+                                          max_depth=6)
+    together = together.numpy()
+    for c in range(3):
+        _, alone = compiled.render_forward(camera, {name: np.eye(3)[c], **others}, spp=SPP, seed=2,
+                                           max_depth=6)
+        alone = alone.numpy()
+        np.testing.assert_allclose(together[..., c], alone[..., c], rtol=1e-4,
+                                   atol=1e-5 * np.abs(alone).max())
+        assert np.abs(alone[..., [k for k in range(3) if k != c]]).max() <= 1e-6 * np.abs(alone).max()

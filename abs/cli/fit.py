@@ -101,5 +101,7 @@ def run(args) -> int:
     if not args.no_report:
         print(f"report: {out / 'report' / 'report.html'}")
     print("\n".join(summary_lines(summary)))
+    for check in summary.get("checks", []):
+        print(f"check: {check}")
     print(f"wrote {out / FIT_FILE}")
     return 0

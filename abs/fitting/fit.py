@@ -17,6 +17,7 @@ from typing import Callable
 import numpy as np
 
 from abs.errors import InputError
+from abs.fitting.checks import run_checks
 from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
 from abs.fitting.observations import Observation, estimate_image_noise, observe
 from abs.fitting.optimizers import (OptimizerState, adam, averaged_refinement_points,
@@ -58,6 +59,8 @@ class FitResult:
     history: list[dict]
     views: list[ViewRenderings] = field(repr=False, default_factory=list)
     truth: dict[str, list] | None = None
+    image_noise: float | None = None
+    checks: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fit-output.md)."""
@@ -83,6 +86,8 @@ class FitResult:
             "wall_s": round(self.wall_s, 3),
             "iterations": self.iterations,
             "method": self.method,
+            "image_noise": self.image_noise,
+            "checks": list(self.checks),
         }
 
 
@@ -285,10 +290,20 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
 
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)
     metrics = {key: {"before": m_before[key], "after": m_after[key]} for key in m_before}
+    # The noise a perfect model would leave: the photographs' and the renderings' own, on the
+    # views the checks judge (holdout views when there are any).
+    judged = [o for o in full.observations if o.holdout] or full.observations
+    image_noise = float(np.mean([np.hypot(estimate_image_noise(o.photograph),
+                                          estimate_image_noise(after[o.name])) for o in judged]))
     views = [ViewRenderings(o.name, o.holdout, o.photograph, before[o.name], after[o.name], o.mask)
              for o in full.observations]
     history = [{**h, "values": {k: v.tolist() for k, v in vector.split(vector.to_physical(h["z"])).items()}}
                for h in state.history]
-    return FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty, metrics,
-                     method, state.iteration, counter.renders, counter.samples,
-                     previous_wall + time.perf_counter() - t0, history, views, truth)
+    result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
+                       metrics, method, state.iteration, counter.renders, counter.samples,
+                       previous_wall + time.perf_counter() - t0, history, views, truth, image_noise)
+    kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
+             for n in names if compiled.specs[n].owner in scene.materials}
+    result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)
+                                                  for n in names}, kinds)
+    return result

@@ -4,11 +4,13 @@
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
 pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite differences:
 
-- :meth:`FitProblem.residuals` with ``jacobian=True`` renders one forward-mode derivative per
-  parameter scalar (:meth:`CompiledScene.render_forward`: tangents carried inside the path loop,
-  about 1.6 primal renders each, memory independent of samples and path length). With few scalars
-  (the usual case: absorption, IOR, scale, pose) this gives the whole Jacobian that Gauss-Newton,
-  Levenberg-Marquardt and the Laplace approximation need.
+- :meth:`FitProblem.residuals` with ``jacobian=True`` renders forward-mode derivatives
+  (:meth:`CompiledScene.render_forward`: tangents carried inside the path loop, about 1.6 primal
+  renders each, memory independent of samples and path length): one per scalar, or one per
+  per-channel parameter whose channels are separable (absorption, IOR, reflectance colour; see
+  :meth:`FitProblem.column_passes`). With few scalars (the usual case: absorption, IOR, scale,
+  pose) this gives the whole Jacobian that Gauss-Newton, Levenberg-Marquardt and the Laplace
+  approximation need.
 - :meth:`FitProblem.gradient` gives the same ``J^T r`` by one reverse pass (plus one primal
   render for ``r``), for problems with many scalars (textures, BRDF coefficients), used by Adam.
 
@@ -153,24 +155,52 @@ class FitProblem:
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(js)
 
+    def column_passes(self, names=None) -> list[tuple[np.ndarray, list[tuple[int, int | None]]]]:
+        """How the Jacobian's columns are rendered: one forward-mode render per entry.
+
+        Returns a list of ``(tangent, columns)``: ``tangent`` over all of the vector's scalars,
+        and the columns that render gives, ``(scalar index, image channel or None)``. A
+        parameter whose channels are separable (``Parameter.separable_channels``: an absorption
+        or IOR per colour channel changes that channel of the image only) takes one render along
+        ``(1, 1, 1)``, whose channel ``c`` is column ``c``; every other scalar takes its own.
+        ``names`` restricts the passes to some parameters (default: all).
+        """
+        passes = []
+        for name, s in self.vector.slices().items():
+            if names is not None and name not in names:
+                continue
+            if self.compiled.specs[name].separable_channels and s.stop - s.start == 3:
+                tangent = np.zeros(self.vector.size)
+                tangent[s] = 1.0
+                passes.append((tangent, [(s.start + c, c) for c in range(3)]))
+                continue
+            for i in range(s.start, s.stop):
+                tangent = np.zeros(self.vector.size)
+                tangent[i] = 1.0
+                passes.append((tangent, [(i, None)]))
+        return passes
+
     def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int):
         cam, p = obs.camera, self.vector.size
         self.set_values(theta)
         image, jac = None, np.zeros((cam.height, cam.width, 3, p))
         slices = self.vector.slices()
-        for i in range(p):
-            # One forward-mode render per parameter scalar, all with the same seed (the same
-            # samples). Every fitted parameter is given a tangent (zero but for scalar i), so that
-            # every column is rendered alike (e.g. dispersive glass splits its paths in each).
-            tangent = np.zeros(p)
-            tangent[i] = 1.0
+        for tangent, columns in self.column_passes():
+            # Every pass renders with the same seed (the same samples), and every fitted
+            # parameter is given a tangent (zero where not wanted), so that every column is
+            # rendered alike (e.g. dispersive glass splits its paths in each).
             rendered, derivative = self.compiled.render_forward(
                 cam, {name: tangent[s] for name, s in slices.items()}, spp=spp, seed=seed,
                 max_depth=self.max_depth)
             self.counter.add(cam, spp)
             if image is None:
                 image = rendered.numpy().astype(np.float64)
-            jac[..., i] = derivative.numpy()
+            derivative = derivative.numpy()
+            for i, channel in columns:
+                if channel is None:
+                    jac[..., i] = derivative
+                else:
+                    jac[..., channel, i] = derivative[..., channel]
         return image, jac
 
     def gradient(self, theta: np.ndarray, spp: int, seed: int,
@@ -202,14 +232,13 @@ class FitProblem:
                 self.counter.add(cam, spp)
                 for name in replayed:
                     grad[slices[name]] += g[name]
-            for name in moving:
-                for i in range(slices[name].start, slices[name].stop):
-                    tangent = np.zeros(self.vector.size)
-                    tangent[i] = 1.0
-                    _, derivative = self.compiled.render_forward(
-                        cam, {n: tangent[slices[n]] for n in moving}, spp=spp, seed=view_seed,
-                        max_depth=self.max_depth)
-                    self.counter.add(cam, spp)
-                    grad[i] += float(np.sum(derivative.numpy() * residual))
+            for tangent, columns in self.column_passes(moving):
+                _, derivative = self.compiled.render_forward(
+                    cam, {n: tangent[slices[n]] for n in moving}, spp=spp, seed=view_seed,
+                    max_depth=self.max_depth)
+                self.counter.add(cam, spp)
+                derivative = derivative.numpy() * residual
+                for i, channel in columns:
+                    grad[i] += float(np.sum(derivative if channel is None else derivative[..., channel]))
         self.set_values(theta)
         return total, grad

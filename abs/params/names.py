@@ -35,6 +35,9 @@ class Parameter:
     moves_paths : bool
         Whether the parameter moves light paths (geometry, refraction) rather than only scaling
         what they carry: its derivatives come from forward mode, never from path replay.
+    separable_channels : bool
+        Per-channel parameter whose channel ``c`` changes image channel ``c`` only (one forward
+        render gives its three Jacobian columns).
     """
 
     name: str
@@ -44,6 +47,7 @@ class Parameter:
     upper: float
     initial: np.ndarray | None
     moves_paths: bool = False
+    separable_channels: bool = False
 
     @property
     def owner(self) -> str:
@@ -65,13 +69,16 @@ def parameter_specs(scene) -> dict[str, Parameter]:
                                                   np.array([env.inverse_distance])),
     }
     for field, (size, unit, lower, upper, _) in type(scene.sensor).FIELDS.items():
+        # A response exponent and a stray-light level per channel act on their channel alone.
         specs[f"sensor.{field}"] = Parameter(f"sensor.{field}", size, unit, lower, upper,
-                                             np.asarray(getattr(scene.sensor, field), np.float64))
+                                             np.asarray(getattr(scene.sensor, field), np.float64),
+                                             separable_channels=field in ("response", "stray_light"))
     for name, material in scene.materials.items():
         for field, spec in material.parameters().items():
             initial = material.value(field) if spec.size != -1 and field in material._toml else None
             specs[f"{name}.{field}"] = Parameter(f"{name}.{field}", spec.size, spec.unit,
-                                                 spec.lower, spec.upper, initial, spec.moves_paths)
+                                                 spec.lower, spec.upper, initial, spec.moves_paths,
+                                                 spec.separable_channels and spec.size == 3)
     for obj in scene.objects:
         specs[f"{obj.name}.pose"] = Parameter(f"{obj.name}.pose", 6, "m, m, m, rad, rad, rad",
                                               -INF, INF, np.asarray(obj.pose, dtype=np.float64),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from html import escape
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -48,8 +49,11 @@ def write_fit_report(folder: str | Path, summary: Mapping, views: Sequence[Repor
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     parameters = summary.get("parameters", {})
-    sections = [html.section("Metrics", html.metrics_table(summary)),
-                html.section("Parameters", html.parameter_table(parameters))]
+    checks = summary.get("checks") or []
+    # What the fit's own numbers say went wrong comes first (abs.fitting.checks).
+    sections = ([html.section("Checks", *(f"<p>{escape(c)}</p>" for c in checks))] if checks else [])
+    sections += [html.section("Metrics", html.metrics_table(summary)),
+                 html.section("Parameters", html.parameter_table(parameters))]
 
     convergence = []
     iterations, loss = loss_curve(history)

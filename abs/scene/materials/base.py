@@ -40,6 +40,10 @@ class ParameterSpec:
         Whether the field changes where light goes (a refractive index, a roughness), not only
         how much of it: its derivatives need attached paths (forward mode), and path replay
         cannot give them (see :meth:`abs.render.PathTracer.render_backward`).
+    separable_channels : bool
+        For a per-channel field (size 3): whether its channel ``c`` changes channel ``c`` of the
+        image only (an absorption or IOR per colour channel, a reflectance colour). Then one
+        forward-mode render along (1, 1, 1) gives all three Jacobian columns, channel by channel.
     """
 
     field: str
@@ -49,6 +53,7 @@ class ParameterSpec:
     upper: float
     mitsuba_key: str | None
     moves_paths: bool = False
+    separable_channels: bool = False
 
 
 class Material(ABC):

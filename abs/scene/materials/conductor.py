@@ -32,9 +32,10 @@ class Conductor(Material):
 
     def parameters(self) -> dict[str, ParameterSpec]:
         specs = {
-            "eta": ParameterSpec("eta", 3, "1", 0.0, 20.0, "eta.value"),
-            "k": ParameterSpec("k", 3, "1", 0.0, 20.0, "k.value"),
+            "eta": ParameterSpec("eta", 3, "1", 0.0, 20.0, "eta.value", separable_channels=True),
+            "k": ParameterSpec("k", 3, "1", 0.0, 20.0, "k.value", separable_channels=True),
         }
         if self.roughness > 0:
-            specs["roughness"] = ParameterSpec("roughness", 1, "1", 1e-3, 1.0, "alpha.value")
+            specs["roughness"] = ParameterSpec("roughness", 1, "1", 1e-3, 1.0, "alpha.value",
+                                               moves_paths=True)
         return specs

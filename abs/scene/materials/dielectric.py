@@ -28,7 +28,9 @@ class Dielectric(Material):
 
     def parameters(self) -> dict[str, ParameterSpec]:
         return {
-            "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior", moves_paths=True),
-            "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption"),
+            "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior", moves_paths=True,
+                                 separable_channels=True),
+            "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption",
+                                        separable_channels=True),
             "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True),
         }

@@ -60,7 +60,8 @@ class Diffuse(Material):
             # The whole texture (H x W x 3 values) is the parameter; its size is known once loaded.
             return {"reflectance": ParameterSpec("reflectance", -1, "1", 0.0, 1.0, "reflectance.data"),
                     "subsurface": subsurface}
-        return {"reflectance": ParameterSpec("reflectance", 3, "1", 0.0, 1.0, "reflectance.value"),
+        return {"reflectance": ParameterSpec("reflectance", 3, "1", 0.0, 1.0, "reflectance.value",
+                                             separable_channels=True),
                 "subsurface": subsurface}
 
     def apply(self, field: str, value, mitsuba_params) -> None:

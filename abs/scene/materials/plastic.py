@@ -29,4 +29,5 @@ class Plastic(Material):
         return {"type": "plastic", **base}
 
     def parameters(self) -> dict[str, ParameterSpec]:
-        return {"reflectance": ParameterSpec("reflectance", 3, "1", 0.0, 1.0, "diffuse_reflectance.value")}
+        return {"reflectance": ParameterSpec("reflectance", 3, "1", 0.0, 1.0, "diffuse_reflectance.value",
+                                                 separable_channels=True)}

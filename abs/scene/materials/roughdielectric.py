@@ -26,6 +26,6 @@ class RoughDielectric(Material):
 
     def parameters(self) -> dict[str, ParameterSpec]:
         return {
-            "ior": ParameterSpec("ior", 1, "1", 1.0, 3.0, "eta"),
-            "roughness": ParameterSpec("roughness", 1, "1", 1e-3, 1.0, "alpha.value"),
+            "ior": ParameterSpec("ior", 1, "1", 1.0, 3.0, "eta", moves_paths=True),
+            "roughness": ParameterSpec("roughness", 1, "1", 1e-3, 1.0, "alpha.value", moves_paths=True),
         }

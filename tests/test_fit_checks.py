@@ -1,0 +1,60 @@
+"""A failing fit says so: the checks read the signs of failure from the fit's own numbers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from abs.fitting.checks import run_checks
+
+BOUNDS = {"glass.ior": (1.0, 3.0), "glass.absorption": (0.0, np.inf), "environment.scale": (0.0, np.inf)}
+KINDS = {"glass.ior": ("dielectric", "ior"), "glass.absorption": ("dielectric", "absorption")}
+
+
+def _summary(**changes):
+    summary = {
+        "parameters": {
+            "glass.ior": {"value": [1.52, 1.525, 1.53], "stderr": [0.002, 0.002, 0.003]},
+            "glass.absorption": {"value": [6.1, 2.4, 1.1], "stderr": [0.3, 0.2, 0.2]},
+            "environment.scale": {"value": [1.6], "stderr": [0.01]},
+        },
+        "correlation": {"names": ["a", "b"], "matrix": [[1.0, 0.4], [0.4, 1.0]]},
+        "holdout_rmse": {"before": 0.27, "after": 0.021},
+        "image_noise": 0.012,
+    }
+    summary.update(changes)
+    return summary
+
+
+def test_a_good_fit_raises_no_check():
+    assert run_checks(_summary(), BOUNDS, KINDS) == []
+
+
+def test_the_failed_glass_fit_of_the_issue_announces_itself():
+    """The fit that returned IOR 2.18 for 1.523, five unconstrained scalars and a holdout RMSE of
+    0.143: every sign is named."""
+    summary = _summary(parameters={
+        "glass.ior": {"value": [2.18, 1.557, 1.669], "stderr": [None, 0.01, None]},
+        "glass.absorption": {"value": [9.03, 4.21, 3.19], "stderr": [None, None, 0.5]},
+        "environment.scale": {"value": [1.46], "stderr": [None]},
+    }, holdout_rmse={"before": 0.27, "after": 0.143})
+    checks = run_checks(summary, BOUNDS, KINDS)
+    text = "\n".join(checks)
+    assert "glass.ior = 2.18 is outside what a real dielectric has" in text
+    assert "glass.ior: the photographs do not constrain component(s) [0, 2]" in text
+    assert "environment.scale: the photographs do not constrain every component" in text
+    assert "holdout RMSE after the fit (0.143) is 11.9 times the photographs' noise" in text
+
+
+def test_bounds_and_trade_offs():
+    summary = _summary(correlation={"names": ["glass.absorption[0]", "environment.scale"],
+                                    "matrix": [[1.0, -0.995], [-0.995, 1.0]]})
+    summary["parameters"]["glass.absorption"]["value"] = [0.0, 2.4, 1.1]
+    checks = run_checks(summary, BOUNDS, KINDS)
+    assert any("glass.absorption[0] = 0 sits at its lower bound 0" in c for c in checks)
+    assert any("trade off (correlation -0.995)" in c for c in checks)
+
+
+def test_without_holdout_views_the_training_residual_is_judged():
+    summary = _summary(holdout_rmse={"before": None, "after": None},
+                       train_rmse={"before": 0.3, "after": 0.2})
+    assert any(c.startswith("The training RMSE") for c in run_checks(summary, BOUNDS, KINDS))
