@@ -190,8 +190,11 @@ class PathTracer:
                 light, ray_out, beta_out, active, pdf_out, prev_delta = self._step(
                     scene, env, sampler, ray_in, _leaf(beta, t_beta), active,
                     _leaf(prev_pdf, t_pdf), prev_delta, depth, split)
+                # Not ClearInput: the parameters' tangents are sources of every iteration, and
+                # clearing them here left only the first vertex differentiated in the parameters.
                 grads = dr.forward_to(light, ray_out.o, ray_out.d, beta_out, pdf_out,
-                                      flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+                                      flags=dr.ADFlag.ClearEdges | dr.ADFlag.ClearInterior
+                                      | dr.ADFlag.AllowNoGrad)
             return (sampler, dr.detach(ray_out), dr.detach(beta_out), radiance + dr.detach(light),
                     active, dr.detach(pdf_out), prev_delta, depth + 1,
                     mi.Vector3f(grads[1]), mi.Vector3f(grads[2]), mi.Color3f(grads[3]),
