@@ -1,0 +1,8 @@
+"""Colour and light from the real set-up: spectral optical constants in RGB, colour-chart
+calibration (camera RGB -> XYZ -> CIE RGB), see docs/colour.md."""
+
+from abs.colour.refractiveindex import OpticalConstants, read_refractiveindex_yaml
+from abs.colour.spectral import channel_centroids_m, optical_constants_rgb, spectrum_to_rgb
+
+__all__ = ["OpticalConstants", "read_refractiveindex_yaml", "optical_constants_rgb",
+           "spectrum_to_rgb", "channel_centroids_m"]
