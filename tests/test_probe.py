@@ -74,7 +74,7 @@ def test_pinhole_unwrap_recovers_the_environment_and_beats_orthographic():
     assert good.sum() > 200
     assert err_pin < 0.01, err_pin
     assert err_ortho > 3 * err_pin, (err_ortho, err_pin)
-    assert err_closed >= err_pin
+    assert err_closed > 3 * err_pin, (err_closed, err_pin)  # the closed formula: 1.9 % vs 0.09 %
 
 
 def test_fresnel_division_matters():
@@ -106,3 +106,27 @@ def test_view_that_does_not_see_the_ball_is_an_error():
         unwrap_view(view, CENTER + np.array([1.0, 0.0, 0.0]), RADIUS, latlong_directions(8, 4))
     with pytest.raises(InputError, match=r"view\.exr: ball: camera is .* inside the ball"):
         unwrap_view(view, CENTER, 1.0, latlong_directions(8, 4))
+
+
+def test_ball_triangulated_from_its_outline_in_two_views():
+    from abs.camera.pinhole import project
+    from abs.probe.ball import triangulate_ball
+
+    cams, outlines = [], []
+    for eye in ([0.0, 0.1, 0.45], [0.4, 0.2, 0.1]):
+        K = intrinsics_from_fov(64, 64, np.radians(14.0))
+        R, t = look_at(eye, CENTER + np.array([0.01, 0.0, 0.0]))  # ball off the image centre
+        c = np.asarray(eye)
+        a = (CENTER - c) / np.linalg.norm(CENTER - c)
+        # Outline: points of the sphere whose tangent ray passes through the camera centre.
+        dist = np.linalg.norm(CENTER - c)
+        e1 = np.cross(a, [0.0, 1.0, 0.0]); e1 /= np.linalg.norm(e1)
+        e2 = np.cross(a, e1)
+        ang = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+        rim = CENTER - a * RADIUS**2 / dist + np.sqrt(RADIUS**2 - RADIUS**4 / dist**2) * (
+            np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+        cams.append((K, R, t))
+        outlines.append(project(K, R, t, rim))
+    centre, radius = triangulate_ball(cams, outlines)
+    np.testing.assert_allclose(centre, CENTER, atol=1e-9)
+    np.testing.assert_allclose(radius, RADIUS, rtol=1e-9)
