@@ -106,3 +106,21 @@ def test_shared_chromium_matches_published_values_near_channel_centroids():
     # R and G channel values must lie in the published visible range (n 2.0-3.9, k 3.0-3.6).
     assert all(2.0 < v < 3.9 for v in values["ior_rgb"])
     assert all(3.0 < v < 3.6 for v in values["k_rgb"])
+
+
+def test_cli_glass_rgb_writes_a_materials_table_with_its_source(tmp_path):
+    import tomllib
+
+    from abs.cli.main import main
+
+    path = _write(tmp_path, BK7, "N-BK7.yml")
+    out = tmp_path / "glass.toml"
+    assert main(["glass", "rgb", str(path), "--name", "lens", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "N-BK7.yml" in text.splitlines()[0]
+    table = tomllib.loads(text)["materials"]["lens"]
+    assert table["type"] == "dielectric"
+    np.testing.assert_allclose(table["ior"], optical_constants_rgb(read_refractiveindex_yaml(path))["ior_rgb"])
+    np.testing.assert_allclose(table["absorption"], 4 * np.pi * 1e-8 / channel_centroids_m(), rtol=0.02)
+    no_k = _write(tmp_path, BK7.split("  - type: tabulated k")[0], "no_k.yml")
+    assert main(["glass", "rgb", str(no_k)]) == 2

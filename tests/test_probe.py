@@ -130,3 +130,25 @@ def test_ball_triangulated_from_its_outline_in_two_views():
     centre, radius = triangulate_ball(cams, outlines)
     np.testing.assert_allclose(centre, CENTER, atol=1e-9)
     np.testing.assert_allclose(radius, RADIUS, rtol=1e-9)
+
+
+def test_cli_unwrap_matches_the_api_and_refuses_a_view_without_the_ball(tmp_path):
+    from abs.cli.main import main
+    from abs.io.capture import save_capture
+    from abs.io.images import read_image
+
+    view = _photograph(eye=[0.0, 0.1, 0.45])
+    save_capture(tmp_path / "cap", [{"name": "front", "K": view.K, "R": view.R, "t": view.t}],
+                 {"front": view.image.astype(np.float32)})
+    yml = tmp_path / "chrome.yml"
+    yml.write_text("DATA:\n  - type: tabulated nk\n    data: |\n        0.30 3.28 3.31\n"
+                   "        0.90 3.28 3.31\n")
+    out = tmp_path / "env.exr"
+    args = ["probe", "unwrap", str(tmp_path / "cap"), "--center", "0,0.1,0", "--radius", "0.05",
+            "--width", "48", "--fresnel", str(yml), "--out", str(out)]
+    assert main(args) == 0
+    api, _ = unwrap_view(ProbeView("front", view.image.astype(np.float32), view.K, view.R, view.t),
+                         CENTER, RADIUS, latlong_directions(48, 24), eta_rgb=[3.28] * 3, k_rgb=[3.31] * 3)
+    np.testing.assert_allclose(read_image(out), api, rtol=1e-4, atol=1e-5)
+    args[4] = "2,0.1,0"  # a ball outside the view
+    assert main(args) == 2
