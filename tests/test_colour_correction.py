@@ -133,3 +133,35 @@ def test_correction_file_round_trip_and_errors(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(InputError, match=r"c\.json: rgb_to_xyz: expected a finite 3x6 matrix"):
         read_correction(path)
+
+
+def test_patches_from_a_label_mask():
+    from abs.colour.chart import patch_rgb_from_labels
+
+    rgb = _camera_rgb(reference_xyz())
+    labels = np.zeros((8, 24), np.uint8)
+    image = np.zeros((8, 24, 3))
+    for i in range(24):
+        r, c = divmod(i, 6)
+        labels[2 * r:2 * r + 2, 4 * c:4 * c + 3] = i + 1
+        image[2 * r:2 * r + 2, 4 * c:4 * c + 3] = rgb[i]
+    np.testing.assert_allclose(patch_rgb_from_labels(image, labels), rgb)
+    labels[labels == 7] = 0
+    with pytest.raises(InputError, match=r"labels\.png: labels: missing patches \[7\]"):
+        check_patches(patch_rgb_from_labels(image, labels), "labels.png", "labels")
+
+
+def test_real_chart_measurements_calibrate_to_the_benchmark_numbers(tmp_path):
+    """The shipped 24-patch UEA example (tests/data): training dE00 of the benchmark's table."""
+    from pathlib import Path
+
+    from abs.cli.main import main
+
+    example = Path(__file__).parent / "data" / "uea_24_outdoor_cloudy.json"
+    out = tmp_path / "c.json"
+    assert main(["colour", "calibrate", "--patches", str(example), "--out", str(out)]) == 0
+    de = json.loads(out.read_text())["delta_e00"]
+    # benchmarks/results/colour_correction.json, uea-24-outdoor-cloudy, train: least squares
+    # 1.72 +- 0.89, refined 1.27 +- 0.96.
+    assert de["before_mean"] == pytest.approx(1.72, abs=0.01)
+    assert de["after_mean"] == pytest.approx(1.27, abs=0.02)
