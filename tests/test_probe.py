@@ -108,25 +108,31 @@ def test_view_that_does_not_see_the_ball_is_an_error():
         unwrap_view(view, CENTER, 1.0, latlong_directions(8, 4))
 
 
-def test_ball_triangulated_from_its_outline_in_two_views():
+def _outline_px(K, R, t, n=24):
+    """Pixels of the ball's true outline: sphere points whose tangent ray meets the camera centre."""
     from abs.camera.pinhole import project
+
+    c = -R.T @ t
+    dist = np.linalg.norm(CENTER - c)
+    a = (CENTER - c) / dist
+    e1 = np.cross(a, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(a, e1)
+    ang = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    rim = CENTER - a * RADIUS**2 / dist + np.sqrt(RADIUS**2 - RADIUS**4 / dist**2) * (
+        np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
+    return project(K, R, t, rim)
+
+
+def test_ball_triangulated_from_its_outline_in_two_views():
     from abs.probe.ball import triangulate_ball
 
     cams, outlines = [], []
     for eye in ([0.0, 0.1, 0.45], [0.4, 0.2, 0.1]):
         K = intrinsics_from_fov(64, 64, np.radians(14.0))
         R, t = look_at(eye, CENTER + np.array([0.01, 0.0, 0.0]))  # ball off the image centre
-        c = np.asarray(eye)
-        a = (CENTER - c) / np.linalg.norm(CENTER - c)
-        # Outline: points of the sphere whose tangent ray passes through the camera centre.
-        dist = np.linalg.norm(CENTER - c)
-        e1 = np.cross(a, [0.0, 1.0, 0.0]); e1 /= np.linalg.norm(e1)
-        e2 = np.cross(a, e1)
-        ang = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-        rim = CENTER - a * RADIUS**2 / dist + np.sqrt(RADIUS**2 - RADIUS**4 / dist**2) * (
-            np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2)
         cams.append((K, R, t))
-        outlines.append(project(K, R, t, rim))
+        outlines.append(_outline_px(K, R, t))
     centre, radius = triangulate_ball(cams, outlines)
     np.testing.assert_allclose(centre, CENTER, atol=1e-9)
     np.testing.assert_allclose(radius, RADIUS, rtol=1e-9)
@@ -152,3 +158,26 @@ def test_cli_unwrap_matches_the_api_and_refuses_a_view_without_the_ball(tmp_path
     np.testing.assert_allclose(read_image(out), api, rtol=1e-4, atol=1e-5)
     args[4] = "2,0.1,0"  # a ball outside the view
     assert main(args) == 2
+
+
+def test_cli_unwrap_with_the_ball_triangulated_from_outlines(tmp_path):
+    import json
+
+    from abs.cli.main import main
+    from abs.io.capture import save_capture
+    from abs.io.images import read_image
+
+    views = {"a": _photograph(eye=[0.0, 0.1, 0.45]), "b": _photograph(eye=[0.45, 0.1, 0.0])}
+    save_capture(tmp_path / "cap", [{"name": n, "K": v.K, "R": v.R, "t": v.t} for n, v in views.items()],
+                 {n: v.image.astype(np.float32) for n, v in views.items()})
+    outlines = tmp_path / "outlines.json"
+    # Outline pixels rounded to 0.1 px, as a careful annotation would give.
+    outlines.write_text(json.dumps({n: np.round(_outline_px(v.K, v.R, v.t), 1).tolist()
+                                    for n, v in views.items()}))
+    common = ["probe", "unwrap", str(tmp_path / "cap"), "--width", "48"]
+    assert main(common + ["--outlines", str(outlines), "--out", str(tmp_path / "tri.exr")]) == 0
+    assert main(common + ["--center", "0,0.1,0", "--radius", "0.05", "--out", str(tmp_path / "known.exr")]) == 0
+    tri, known = read_image(tmp_path / "tri.exr"), read_image(tmp_path / "known.exr")
+    assert np.mean(np.abs(tri - known)) < 0.01 * np.mean(known)
+    outlines.write_text(json.dumps({"a": [[1, 2], [3, 4], [5, 6]]}))
+    assert main(common + ["--outlines", str(outlines), "--out", str(tmp_path / "x.exr")]) == 2
