@@ -134,8 +134,10 @@ class ColourCorrection:
     def to_xyz(self, rgb: np.ndarray) -> np.ndarray:
         """Linear camera RGB ``(..., 3)`` -> XYZ ``(..., 3)`` on the reference scale."""
         rgb = np.asarray(rgb, np.float64)
-        # Root terms of negative values (noise in dark pixels) are undefined: clamp at 0.
-        return expand(np.maximum(rgb, 0.0), self.degree) @ self.matrix.T
+        if self.degree > 1:
+            # Root terms of negative values (noise in dark pixels) are undefined: clamp at 0.
+            rgb = np.maximum(rgb, 0.0)
+        return expand(rgb, self.degree) @ self.matrix.T
 
     def apply(self, rgb: np.ndarray) -> np.ndarray:
         """Linear camera RGB ``(..., 3)`` -> linear output-space RGB, ``float32``."""
