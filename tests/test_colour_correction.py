@@ -88,6 +88,26 @@ def test_patches_from_corner_points_of_a_synthetic_photograph():
     np.testing.assert_allclose(patch_rgb_from_corners(image, corners), rgb, rtol=1e-12)
 
 
+def test_cli_calibrate_from_a_photograph_with_corner_points(tmp_path):
+    from abs.cli.main import main
+    from abs.io.images import write_exr
+
+    xyz = reference_xyz()
+    rgb = 0.5 * _camera_rgb(xyz)  # any exposure
+    image = np.zeros((48, 64, 3), np.float32)
+    for i in range(24):
+        r, c = divmod(i, 6)
+        image[8 + 9 * r - 3:8 + 9 * r + 4, 8 + 9 * c - 3:8 + 9 * c + 4] = rgb[i]
+    write_exr(tmp_path / "chart.exr", image)
+    out = tmp_path / "c.json"
+    base = ["colour", "calibrate", "--image", str(tmp_path / "chart.exr"), "--degree", "1",
+            "--no-refine", "--out", str(out)]
+    assert main(base + ["--corners", "8,8,53,8,53,35,8,35"]) == 0
+    assert json.loads(out.read_text())["delta_e00"]["after_mean"] < 1e-3
+    # Corner points that put the last row below the image: patches 19-24 are missing.
+    assert main(base + ["--corners", "8,8,53,8,53,50,8,50"]) == 2
+
+
 def test_missing_patches_name_file_and_field():
     rgb = _camera_rgb(reference_xyz())
     rgb[[4, 20]] = np.nan
