@@ -64,7 +64,7 @@ def _read_libraw(path: Path) -> RawFrame:
         with rawpy.imread(str(path)) as raw:
             mosaic = np.array(raw.raw_image_visible, dtype=np.float64)
             colours = "".join(chr(raw.color_desc[i]) for i in raw.raw_pattern.ravel()[:4])
-            pattern = colours.replace("G", "G") if set(colours) <= set("RGB") else None
+            pattern = colours if set(colours) <= set("RGB") else None
             return RawFrame(mosaic, float(raw.white_level),
                             float(np.mean(raw.black_level_per_channel)), pattern)
     except Exception as exc:  # LibRaw raises its own types for every unreadable file

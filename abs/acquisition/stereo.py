@@ -75,10 +75,12 @@ def calibrate_stereo(points1: Sequence[np.ndarray], points2: Sequence[np.ndarray
     p1 = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in points1]
     p2 = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in points2]
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-    out = cv2.stereoCalibrate(obj, p1, p2, np.asarray(K1, np.float64), np.asarray(dist1),
-                              np.asarray(K2, np.float64), np.asarray(dist2), (width, height),
-                              None, None, flags=cv2.CALIB_FIX_INTRINSIC, criteria=criteria)
-    rms, _, _, _, _, R, T, E, F, per_view = out
+    out = cv2.stereoCalibrateExtended(obj, p1, p2, np.asarray(K1, np.float64),
+                                      np.asarray(dist1), np.asarray(K2, np.float64),
+                                      np.asarray(dist2), (width, height), np.eye(3),
+                                      np.zeros((3, 1)), flags=cv2.CALIB_FIX_INTRINSIC,
+                                      criteria=criteria)
+    rms, _, _, _, _, R, T, E, F, _, _, per_view = out
     return StereoCalibration(R=np.asarray(R, np.float64), T=np.ravel(T).astype(np.float64),
                              E=np.asarray(E, np.float64), F=np.asarray(F, np.float64),
                              rms_px=float(rms), pair_rms_px=np.asarray(per_view, np.float64))
