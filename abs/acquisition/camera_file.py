@@ -143,4 +143,5 @@ def write_camera_file(path: str | Path, cameras: dict[str, CameraModel]) -> None
             entry["rms_px"] = float(cam.rms_px)
         out[name] = entry
     text = json.dumps({"format": FORMAT_NAME, "version": 1, "cameras": out}, indent=2)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text(text + "\n", encoding="utf-8")
