@@ -20,10 +20,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from abs.acquisition.camera_file import read_camera_file
-from abs.acquisition.demosaic import demosaic_bilinear
+from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
 from abs.acquisition.hdr import MergedHDR, merge_brackets
 from abs.acquisition.raw import read_raw
 from abs.acquisition.undistort import pinhole_K, undistort_image
@@ -36,21 +37,32 @@ __all__ = ["build_capture", "load_frame"]
 _VIEW_KEYS = {"name", "camera", "frames", "exposures_s", "darks", "holdout"}
 
 
-def load_frame(path: Path, cfa_pattern: str | None) -> tuple[np.ndarray, float]:
-    """One frame as ``(H, W, 3)`` linear values and its white level (data numbers).
+def load_frame(path: Path, cfa_pattern: str | None,
+               saturation: float = 0.95) -> tuple[np.ndarray, np.ndarray]:
+    """One frame as ``(H, W, 3)`` linear values (data numbers) and its saturation mask.
 
-    Raw mosaics are demosaiced bilinearly (CFA pattern from the file, else ``cfa_pattern``);
-    EXR files are taken as already linear RGB with no saturation level (infinity).
+    Raw mosaics are demosaiced bilinearly (CFA pattern from the file, else ``cfa_pattern``), with
+    the black level subtracted. A demosaiced pixel is saturated when any mosaic site within its
+    3x3 neighbourhood (the bilinear kernels' support) of the same colour is at or above ``saturation`` times the
+    white level: interpolation would otherwise hide a clipped neighbour (at the border, reflected
+    bilinear gives half a clipped value). EXR files are taken as already linear RGB, never
+    saturated.
     """
     if path.suffix.lower() == ".exr":
-        return read_image(path).astype(np.float64), np.inf
+        rgb = read_image(path).astype(np.float64)
+        return rgb, np.zeros(rgb.shape, bool)
     frame = read_raw(path)
     pattern = frame.cfa_pattern or cfa_pattern
     if pattern is None:
         raise InputError(path, "cfa_pattern", "the file does not state its Bayer pattern; give "
                                               "cfa_pattern (RGGB, BGGR, GRBG or GBRG)")
-    return demosaic_bilinear(frame.mosaic - frame.black_level, pattern).astype(np.float64), \
-        frame.white_level - frame.black_level
+    clipped = frame.mosaic >= saturation * frame.white_level
+    sites = cfa_masks(frame.mosaic.shape, pattern)
+    near_clipped = np.stack([cv2.dilate((clipped & sites[..., c]).astype(np.uint8),
+                                        np.ones((3, 3), np.uint8)).astype(bool)
+                             for c in range(3)], axis=-1)
+    rgb = demosaic_bilinear(frame.mosaic - frame.black_level, pattern).astype(np.float64)
+    return rgb, near_clipped
 
 
 def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path,
@@ -68,17 +80,17 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
         raise InputError(source, f"{field}.frames", f"mixed image sizes {sorted(shapes)}")
     darks = None
     if entry.get("darks") is not None:
+        if not isinstance(entry["darks"], list) or len(entry["darks"]) != len(frames):
+            raise InputError(source, f"{field}.darks", f"expected {len(frames)} dark frames, one "
+                                                       "per frame (the same file may repeat)")
         darks = [load_frame(folder / f, cfa)[0] for f in entry["darks"]]
         for f, d in zip(entry["darks"], darks):
             if d.shape != loaded[0][0].shape:
                 raise InputError(folder / f, "", f"dark frame is {d.shape[1]}x{d.shape[0]}, "
                                                  f"frames {loaded[0][0].shape[1]}x"
                                                  f"{loaded[0][0].shape[0]}: mixed image sizes")
-    white = min(w for _, w in loaded)
-    # Demosaicing averages neighbours, so saturation is judged on the interpolated values: a
-    # pixel next to a clipped site reads below white and is kept only if truly below it.
-    return merge_brackets([img for img, _ in loaded], exposures, white, darks,
-                          source=f"{source}: {field}")
+    return merge_brackets([img for img, _ in loaded], exposures, np.inf, darks,
+                          saturated=[sat for _, sat in loaded], source=f"{source}: {field}")
 
 
 def build_capture(build_file: str | Path, out: str | Path,

@@ -61,6 +61,7 @@ def check_exposures(exposures_s: Sequence[float], source: str | None = None) -> 
 def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
                    white_level: float, darks: Sequence[np.ndarray] | None = None,
                    saturation: float = 0.95, dark_floor: float = 2.0,
+                   saturated: Sequence[np.ndarray] | None = None,
                    source: str | None = None) -> MergedHDR:
     """Merge linear frames of one scene taken at increasing exposure times.
 
@@ -79,6 +80,9 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
     dark_floor : float
         A dark-subtracted value below this many data numbers is too dark and excluded (quantised
         noise, not signal).
+    saturated : sequence of np.ndarray, optional
+        Per frame, boolean masks of saturated values, replacing the ``saturation`` test (e.g.
+        demosaiced pixels interpolated from a clipped mosaic site, see :mod:`.build`).
     source : str, optional
         Where the bracket came from, for error messages.
     """
@@ -94,7 +98,11 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
     else:
         dark = np.zeros_like(stack)
     signal = stack - dark
-    saturated = stack >= saturation * white_level
+    if saturated is None:
+        saturated = stack >= saturation * white_level
+    else:
+        saturated = np.stack([np.broadcast_to(np.asarray(m, bool), stack.shape[1:])
+                              for m in saturated])
     used = ~saturated & (signal >= dark_floor)
     shape = (-1,) + (1,) * (stack.ndim - 1)
     exposure = np.broadcast_to(t.reshape(shape), stack.shape)
