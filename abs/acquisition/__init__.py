@@ -1,0 +1,8 @@
+"""Acquisition: from camera photographs to a capture folder (see docs/acquisition.md).
+
+Board detection (:mod:`.board`), intrinsic calibration (:mod:`.intrinsics`), stereo
+(:mod:`.stereo`), extrinsics from a board in the scene (:mod:`.extrinsics`), the camera file
+(:mod:`.camera_file`), undistortion (:mod:`.undistort`), raw mosaics (:mod:`.raw`), bilinear
+demosaicing (:mod:`.demosaic`), bracket merging (:mod:`.hdr`) and capture building
+(:mod:`.build`).
+"""

@@ -1,0 +1,42 @@
+"""Undistortion: from a camera with lens distortion to the capture contract's pinhole.
+
+The new pinhole K comes from ``getOptimalNewCameraMatrix`` with ``alpha = 0`` (only valid
+pixels, the image size kept): the focal length and the principal point move as undistortion
+moves them, and the undistorted image is resampled with ``initUndistortRectifyMap`` + ``remap``
+(bilinear). R and t are unchanged: undistortion does not move the camera.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from abs.acquisition.camera_file import CameraModel
+
+__all__ = ["pinhole_K", "undistort_image"]
+
+
+def pinhole_K(camera: CameraModel, alpha: float = 0.0) -> np.ndarray:
+    """The distortion-free camera matrix of the undistorted image (same size), pixels.
+
+    Parameters
+    ----------
+    camera : CameraModel
+        The calibrated camera.
+    alpha : float
+        0 keeps only valid pixels (no black borders), 1 keeps every source pixel.
+    """
+    size = (camera.width, camera.height)
+    K_new, _ = cv2.getOptimalNewCameraMatrix(camera.K, camera.distortion, size, alpha, size)
+    return np.asarray(K_new, np.float64)
+
+
+def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> np.ndarray:
+    """Resample ``image`` (H, W[, C], float) as seen by the pinhole ``K_new`` (bilinear)."""
+    if image.shape[:2] != (camera.height, camera.width):
+        raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, camera "
+                         f"{camera.width}x{camera.height}")
+    map1, map2 = cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
+                                             (camera.width, camera.height), cv2.CV_32FC1)
+    return cv2.remap(np.asarray(image, np.float32), map1, map2, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT)

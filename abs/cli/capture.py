@@ -1,0 +1,46 @@
+"""``abs capture build BUILD.json --out CAPTURE``: photographs + darks + calibration -> capture.
+
+The build file format is in :mod:`abs.acquisition.build`. ``--report DIR`` writes each view's
+HDR weight map (total exposure time used per pixel) as PNG.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("capture", help="make capture folders from real photographs")
+    kinds = p.add_subparsers(dest="kind", required=True)
+    q = kinds.add_parser("build", help="demosaic, subtract darks, merge brackets, undistort and "
+                                       "write cameras.json plus EXRs")
+    q.add_argument("build_file", type=Path, help="build file (JSON) listing views and frames")
+    q.add_argument("--out", type=Path, required=True, help="capture folder to write")
+    q.add_argument("--report", type=Path, help="folder for the HDR weight maps")
+    q.set_defaults(run=run)
+
+
+def run(args) -> int:
+    import json
+
+    from tqdm import tqdm
+
+    from abs.acquisition.build import build_capture
+    from abs.acquisition.figures import write_weight_png
+
+    spec = json.loads(args.build_file.read_text(encoding="utf-8")) if args.build_file.is_file() \
+        else {}
+    total = len(spec.get("views", [])) if isinstance(spec, dict) else None
+    with tqdm(total=total, desc="build", unit="view") as bar:
+        capture, merges = build_capture(args.build_file, args.out, progress=bar.update)
+    for name, merged in merges.items():
+        n_sat = int(merged.saturated_everywhere.sum())
+        used = merged.used.reshape(merged.used.shape[0], -1).mean(axis=1)
+        print(f"{name}: frames used on " + ", ".join(f"{100 * u:.0f} %" for u in used)
+              + " of pixels" + (f"; {n_sat} values saturated in every frame (lower bounds)"
+                                if n_sat else ""))
+        if args.report:
+            args.report.mkdir(parents=True, exist_ok=True)
+            write_weight_png(args.report / f"{name}_weight.png", merged.weight)
+    print(f"wrote {len(capture.views)} views to {args.out}")
+    return 0
