@@ -292,6 +292,7 @@ def test_comparison_pairs_cells_and_tests_two_sd():
     assert vertex.difference == pytest.approx(2.0 - 0.66)
     assert vertex.within_2sd  # 1.34 <= 2 √(1.15² + 0.5²) = 2.51
     assert vertex.abs_repetition_sd == 0.25
+    assert vertex.paper_rise == pytest.approx(0.66 - 0.41) and vertex.abs_rise == pytest.approx(2.0 - 1.5)
     assert by_key[("2", "vertex position 3 mm", "blue-rubber")].abs_mean is None
     assert by_key[("1", "icosphere 5*", "purple-paint")].within_2sd is None
     # A difference beyond two combined sds: abs 4.0 ± 0.5 against 0.66 ± 1.15.
@@ -325,7 +326,7 @@ def test_report_says_when_the_paper_file_is_absent(tmp_path, monkeypatch, capsys
     assert "were not found (looked for x.md)" in html and "subdiv. 1" in html
     # With the tables: each published cell beside abs's.
     text = paper_markdown(summary, parse_paper_tables(PAPER_EXAMPLE, "example.md"))
-    assert "| vertex position 1 mm | blue-rubber | 0.66 ± 1.15 | 2.00 ± 0.50 | 0.25 | +1.34 | yes | yes |" in text
+    assert "| vertex position 1 mm | blue-rubber | 0.66 ± 1.15 | 2.00 ± 0.50 | 0.25 | +1.34 | yes | yes | +0.25 / +0.50 |" in text
     assert "<td>0.66 ± 1.15</td>" in write_html(tmp_path / "report.html", summary, [], text).read_text()
     # An explicit file that does not exist is an error naming it.
     assert main(["study", "sl-paper", "--study", str(study), "--paper-tables", str(tmp_path / "none.md")]) == 2

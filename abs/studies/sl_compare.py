@@ -43,6 +43,9 @@ class CellComparison:
         abs's mean and its sd over the sphere's pixels (averaged over repetitions in Table 2).
     abs_repetition_sd : float or None
         abs's sd of the per-image mean over repetitions (Table 2's error rows only).
+    paper_ideal, abs_ideal : float or None
+        The error-free mean of the same material (Table 2's error rows only): the rise over it
+        compares how much an error costs, apart from the two error-free floors.
     """
 
     table: str
@@ -53,6 +56,18 @@ class CellComparison:
     abs_mean: float | None
     abs_pixel_sd: float | None
     abs_repetition_sd: float | None = None
+    paper_ideal: float | None = None
+    abs_ideal: float | None = None
+
+    @property
+    def paper_rise(self) -> float | None:
+        """Published mean − published error-free mean."""
+        return None if self.paper_ideal is None else self.paper_mean - self.paper_ideal
+
+    @property
+    def abs_rise(self) -> float | None:
+        """abs's mean − abs's error-free mean."""
+        return None if self.abs_ideal is None or self.abs_mean is None else self.abs_mean - self.abs_ideal
 
     @property
     def difference(self) -> float | None:
@@ -118,7 +133,9 @@ def compare_tables(summary: dict, paper: PaperTables) -> list[CellComparison]:
                 own = _get(ours2, noise, level, material)
                 out.append(CellComparison("2", f"{noise.replace('_', ' ')} {level} {unit}", material,
                                           cell["mean"], cell["sd"], _get(own, "mean"),
-                                          _get(own, "pixel_sd"), _get(own, "sd")))
+                                          _get(own, "pixel_sd"), _get(own, "sd"),
+                                          _get(paper.ideal, material, "mean"),
+                                          _get(ours1, material, tess, "mean")))
     return out
 
 
@@ -171,7 +188,9 @@ def _verdict(within: bool | None) -> str:
 
 
 def markdown_comparison(cells: list[CellComparison]) -> str:
-    """Both tables, one line per published cell: published, abs, Δ, within 2 sd (Markdown)."""
+    """Both tables, one line per published cell: published, abs, Δ, within 2 sd; in Table 2 also
+    abs's sd over repetitions and the verdict with it, and each side's rise over its error-free
+    mean (Markdown)."""
     parts = []
     for table, title in (("1", "Table 1 (no scanner error)"), ("2", "Table 2 (icosphere 5, scanner errors)")):
         own = [c for c in cells if c.table == table]
@@ -182,14 +201,16 @@ def markdown_comparison(cells: list[CellComparison]) -> str:
                 "within 2 sd (per pixel)"]
         if repetitions:
             head[4:4] = ["abs sd over repetitions"]
-            head.append("within 2 sd (per repetition)")
+            head += ["within 2 sd (per repetition)", "rise over ideal: published / abs"]
         lines = [f"{title}:", "", "| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
         for c in own:
             row = [c.row, c.material, _pm(c.paper_mean, c.paper_sd), _pm(c.abs_mean, c.abs_pixel_sd),
                    _number(c.difference, "+.2f"), _verdict(c.within_2sd)]
             if repetitions:
                 row[4:4] = [_number(c.abs_repetition_sd)]
-                row.append(_verdict(c.within_2sd_repetitions))
+                row += [_verdict(c.within_2sd_repetitions),
+                        f"{_number(c.paper_rise, '+.2f')} / {_number(c.abs_rise, '+.2f')}"
+                        if c.paper_rise is not None else "—"]
             lines.append("| " + " | ".join(row) + " |")
         parts.append("\n".join(lines))
     return "\n\n".join(parts)
