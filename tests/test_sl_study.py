@@ -123,7 +123,10 @@ def test_study_end_to_end(small_basis, tmp_path):
     from abs.studies.sl_study import run_study
 
     out = tmp_path / "study"
-    summary = run_study(_config(small_basis), out, workers=2)
+    # Without the paper's tables (a user without ../shared/docs) the study runs and says so.
+    summary = run_study(_config(small_basis), out, workers=2, paper_tables=tmp_path / "absent.md")
+    for name in ("paper_comparison.md", "report.html"):
+        assert "published tables were not found" in (out / name).read_text(), name
     for name in ("study.json", "table1.md", "table2.md", "report.html", f"profile_{MATERIAL}.png"):
         assert (out / name).is_file(), name
     assert json.loads((out / "study.json").read_text())["table1"] == summary["table1"]
@@ -137,6 +140,10 @@ def test_study_end_to_end(small_basis, tmp_path):
     assert "normal tilt" in (out / "table2.md").read_text()
     # Rerunning resumes from the per-task results: nothing is recomputed.
     assert run_study(_config(small_basis), out)["tasks_run"] == 0
+    if PAPER_FILE.is_file():  # the default file: the published cell beside abs's
+        row = summary["table1"][MATERIAL]["1"]
+        line = f"| icosphere 1 | {MATERIAL} | 2.77 ± 2.93 | {row['mean']:.2f} ± {row['sd']:.2f} |"
+        assert line in (out / "paper_comparison.md").read_text()
 
 
 @needs_shared
