@@ -77,10 +77,10 @@ def _cells(line: str) -> list[str]:
     return [c.strip() for c in line.strip().strip("|").split("|")]
 
 
-def _tables_by_heading(text: str, source: str) -> dict[str, tuple[int, list[tuple[int, list[str]]]]]:
-    """{"1": (heading line, [(line number, cells), ...]), "2": ...}: the pipe table under each
+def _tables_by_heading(text: str, source: str) -> dict[str, list[tuple[int, list[str]]]]:
+    """{"1": [(line number, cells), ...], "2": ...}: the first pipe table under each
     ``## Table N`` heading (header first, separator dropped)."""
-    found: dict[str, tuple[int, list[tuple[int, list[str]]]]] = {}
+    found: dict[str, list[tuple[int, list[str]]]] = {}
     current: str | None = None
     separated = False
     for number, line in enumerate(text.splitlines(), start=1):
@@ -98,7 +98,7 @@ def _tables_by_heading(text: str, source: str) -> dict[str, tuple[int, list[tupl
             if current in found:
                 current = None  # the table has ended; anything after it is not read
             continue
-        rows = found.setdefault(current, (number, []))[1]
+        rows = found.setdefault(current, [])
         if rows and not separated:
             if not _SEPARATOR.match(stripped.replace(" ", "")):
                 raise InputError(source, f"line {number}", "expected the header separator row "
@@ -107,7 +107,7 @@ def _tables_by_heading(text: str, source: str) -> dict[str, tuple[int, list[tupl
             continue
         rows.append((number, _cells(stripped)))
     for key in ("1", "2"):
-        if key not in found or len(found[key][1]) < 2:
+        if key not in found or len(found[key]) < 2:
             raise InputError(source, f"Table {key}", f"no Markdown table under a '## Table {key}' heading")
     return found
 
@@ -195,8 +195,8 @@ def parse_paper_tables(text: str, source: str = "<text>") -> PaperTables:
         A table is missing or malformed (the message names ``source`` and the line).
     """
     found = _tables_by_heading(text, source)
-    table2, ideal = _table2(found["2"][1], source)
-    return PaperTables(source=source, table1=_table1(found["1"][1], source), table2=table2, ideal=ideal)
+    table2, ideal = _table2(found["2"], source)
+    return PaperTables(source=source, table1=_table1(found["1"], source), table2=table2, ideal=ideal)
 
 
 def read_paper_tables(path: str | Path) -> PaperTables:
