@@ -176,6 +176,8 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
     assert main(base + ["--repetitions", "0"]) == 2
     assert main(base) == 2  # the basis file does not exist
     assert "basis file not found" in capsys.readouterr().err
+    assert main(base + ["--paper-tables", str(tmp_path / "tables.md")]) == 2  # checked before the run
+    assert "tables.md: --paper-tables: file not found" in capsys.readouterr().err
 
 
 # -- the paper's published tables beside abs's ---------------------------------------------------
