@@ -340,3 +340,19 @@ def test_report_says_when_the_paper_file_is_absent(tmp_path, monkeypatch, capsys
     # An explicit file that does not exist is an error naming it.
     assert main(["study", "sl-paper", "--study", str(study), "--paper-tables", str(tmp_path / "none.md")]) == 2
     assert "none.md" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not PAPER_FILE.is_file(), reason=f"{PAPER_FILE} not present (see ../shared/README.md)")
+def test_docs_show_the_comparison_of_the_committed_run():
+    """docs/sl-study.md's side-by-side tables are what the code makes of the committed full-size
+    run (benchmarks/results/sl_study.json) and the published file."""
+    from pathlib import Path
+
+    from abs.studies.sl_compare import compare_tables, markdown_comparison
+    from abs.studies.sl_paper import read_paper_tables
+
+    root = Path(__file__).resolve().parents[1]
+    summary = json.loads((root / "benchmarks" / "results" / "sl_study.json").read_text())
+    assert summary["config"]["repetitions"] == 30 and summary["config"]["width"] == 640
+    tables = markdown_comparison(compare_tables(summary, read_paper_tables(PAPER_FILE)))
+    assert tables in (root / "docs" / "sl-study.md").read_text()
