@@ -1,4 +1,5 @@
-"""Figures and the HTML page of the structured-light study (storage and plotting only)."""
+"""Figures, the HTML page and the published-tables section of the structured-light study (storage,
+plotting and text only)."""
 
 from __future__ import annotations
 
