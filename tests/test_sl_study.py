@@ -123,7 +123,10 @@ def test_study_end_to_end(small_basis, tmp_path):
     from abs.studies.sl_study import run_study
 
     out = tmp_path / "study"
-    summary = run_study(_config(small_basis), out, workers=2)
+    # Without the paper's tables (a user without ../shared/docs) the study runs and says so.
+    summary = run_study(_config(small_basis), out, workers=2, paper_tables=tmp_path / "absent.md")
+    for name in ("paper_comparison.md", "report.html"):
+        assert "published tables were not found" in (out / name).read_text(), name
     for name in ("study.json", "table1.md", "table2.md", "report.html", f"profile_{MATERIAL}.png"):
         assert (out / name).is_file(), name
     assert json.loads((out / "study.json").read_text())["table1"] == summary["table1"]
@@ -137,6 +140,10 @@ def test_study_end_to_end(small_basis, tmp_path):
     assert "normal tilt" in (out / "table2.md").read_text()
     # Rerunning resumes from the per-task results: nothing is recomputed.
     assert run_study(_config(small_basis), out)["tasks_run"] == 0
+    if PAPER_FILE.is_file():  # the default file: the published cell beside abs's
+        row = summary["table1"][MATERIAL]["1"]
+        line = f"| icosphere 1 | {MATERIAL} | 2.77 ± 2.93 | {row['mean']:.2f} ± {row['sd']:.2f} |"
+        assert line in (out / "paper_comparison.md").read_text()
 
 
 @needs_shared
@@ -169,3 +176,183 @@ def test_cli_rejects_bad_input(tmp_path, capsys):
     assert main(base + ["--repetitions", "0"]) == 2
     assert main(base) == 2  # the basis file does not exist
     assert "basis file not found" in capsys.readouterr().err
+    assert main(base + ["--paper-tables", str(tmp_path / "tables.md")]) == 2  # checked before the run
+    assert "tables.md: --paper-tables: file not found" in capsys.readouterr().err
+
+
+# -- the paper's published tables beside abs's ---------------------------------------------------
+PAPER_FILE = SHARED / "docs" / "sl-study-paper-tables.md"
+
+# A small file in the layout of ../shared/docs/sl-study-paper-tables.md (values made up).
+PAPER_EXAMPLE = """# Published numbers
+
+Some text.
+
+## Table 1: geometric detail
+| | blue-rubber | purple-paint |
+|---|---|---|
+| Icosphere 1 | 0.77 ± 1.02 | 1.56 ± 1.96 |
+| Icosphere 5* | 0.52 ± 0.96 | 1.58 ± 1.55 |
+
+## Table 2: noise in the scanner
+
+| noise | σ | blue-rubber | purple-paint |
+|---|---|---|---|
+| Ideal | | 0.41 ± 0.67 | 0.55 ± 0.75 |
+| Vertex position | 1 mm | 0.66 ± 1.15 | 0.91 ± 1.56 |
+| | 3 mm | 2.50 ± 2.82 | 2.11 ± 3.16 |
+| Normal (polar tilt) | 5° | 0.42 ± 0.63 | 0.68 ± 1.03 |
+| Light intensity | 20 % | 1.75 ± 1.75 | 1.86 ± 2.10 |
+
+## Settings
+- not read
+"""
+
+
+def test_paper_tables_parse_into_the_study_layout():
+    from abs.studies.sl_paper import parse_paper_tables
+
+    paper = parse_paper_tables(PAPER_EXAMPLE, "example.md")
+    assert paper.table1 == {"blue-rubber": {"1": {"mean": 0.77, "sd": 1.02}, "5*": {"mean": 0.52, "sd": 0.96}},
+                            "purple-paint": {"1": {"mean": 1.56, "sd": 1.96}, "5*": {"mean": 1.58, "sd": 1.55}}}
+    assert paper.ideal["purple-paint"] == {"mean": 0.55, "sd": 0.75}
+    # Keys as abs's table2 writes them: NOISE_TYPES names, levels f"{level:g}" in the type's unit.
+    assert paper.table2 == {
+        "vertex_position": {"1": {"blue-rubber": {"mean": 0.66, "sd": 1.15}, "purple-paint": {"mean": 0.91, "sd": 1.56}},
+                            "3": {"blue-rubber": {"mean": 2.5, "sd": 2.82}, "purple-paint": {"mean": 2.11, "sd": 3.16}}},
+        "normal_tilt": {"5": {"blue-rubber": {"mean": 0.42, "sd": 0.63}, "purple-paint": {"mean": 0.68, "sd": 1.03}}},
+        "light_intensity": {"20": {"blue-rubber": {"mean": 1.75, "sd": 1.75}, "purple-paint": {"mean": 1.86, "sd": 2.1}}},
+    }
+
+
+@pytest.mark.parametrize(("old", "new", "line", "words"), [
+    ("| Icosphere 1 | 0.77 ± 1.02 |", "| Icosphere 1 | 0.77 ~ 1.02 |", 8, "expected 'mean ± sd'"),
+    ("| | 3 mm | 2.50 ± 2.82 | 2.11 ± 3.16 |", "| | 3 mm | 2.50 ± 2.82 |", 17, "3 cells, the header has 4"),
+    ("| Normal (polar tilt) | 5° |", "| Normal (polar tilt) | 5 mm |", 18, "measured in deg"),
+    ("| Light intensity |", "| Earthquake |", 19, "unknown error type"),
+    ("| Icosphere 5* |", "| Sphere 5 |", 9, "Icosphere N"),
+    ("|---|---|---|\n| Icosphere 1", "| Icosphere 1", 7, "separator"),
+])
+def test_malformed_paper_table_names_file_and_line(old, new, line, words):
+    from abs.errors import InputError
+    from abs.studies.sl_paper import parse_paper_tables
+
+    assert old in PAPER_EXAMPLE
+    with pytest.raises(InputError, match=words) as caught:
+        parse_paper_tables(PAPER_EXAMPLE.replace(old, new, 1), "example.md")
+    assert caught.value.source == "example.md"
+    assert caught.value.field == f"line {line}"
+
+
+def test_missing_paper_table_is_named(tmp_path):
+    from abs.errors import InputError
+    from abs.studies.sl_paper import read_paper_tables
+
+    path = tmp_path / "tables.md"
+    path.write_text(PAPER_EXAMPLE.replace("## Table 2: noise", "## Noise"), encoding="utf-8")
+    with pytest.raises(InputError, match="Table 2") as caught:
+        read_paper_tables(path)
+    assert caught.value.source == str(path)
+
+
+@pytest.mark.skipif(not PAPER_FILE.is_file(), reason=f"{PAPER_FILE} not present (see ../shared/README.md)")
+def test_the_real_paper_file_parses():
+    """Every published cell lands in the study's layout, with values copied from the paper."""
+    from abs.studies.sl_noise import NOISE_TYPES
+    from abs.studies.sl_paper import read_paper_tables
+
+    paper = read_paper_tables(PAPER_FILE)
+    materials = ["blue-rubber", "green-metallic-paint", "purple-paint", "specular-black-phenolic"]
+    assert list(paper.table1) == materials
+    assert all(list(rows) == ["1", "3", "5", "5*"] for rows in paper.table1.values())
+    assert paper.table1["green-metallic-paint"]["5*"] == {"mean": 5.19, "sd": 5.2}
+    # Table 2's levels are the study's own (sl_noise.py) for every error type.
+    assert {n: list(levels) for n, levels in paper.table2.items()} == \
+        {n: [f"{x:g}" for x in t.levels] for n, t in NOISE_TYPES.items()}
+    assert all(list(row) == materials for levels in paper.table2.values() for row in levels.values())
+    assert paper.table2["normal_tilt"]["30"]["specular-black-phenolic"] == {"mean": 5.24, "sd": 8.31}
+    assert paper.table2["light_intensity"]["20"]["blue-rubber"] == {"mean": 1.75, "sd": 1.75}
+    # The paper's Table 2 "Ideal" row is its Table 1 icosphere 5 row.
+    assert paper.ideal == {m: paper.table1[m]["5"] for m in materials}
+
+
+def _summary():
+    """A study.json's tables for the example's materials: abs 1.5 ± 1.0 error-free, 2.0 with error."""
+    cell1 = {"mean": 1.5, "sd": 1.0, "samples": 100, "lambert_mean": 3.0, "lambert_sd": 2.0}
+    cell2 = {"mean": 2.0, "sd": 0.25, "pixel_sd": 0.5, "repetitions": 30, "samples_mean": 100.0}
+    return {"config": {"noise_tessellation": 1, "materials": ["blue-rubber"]}, "runtime_s": 1.0,
+            "table1": {"blue-rubber": {"1": cell1}},
+            "table2": {"vertex_position": {"1": {"blue-rubber": cell2}}}}
+
+
+def test_comparison_pairs_cells_and_tests_two_sd():
+    from abs.studies.sl_compare import compare_tables, convention_summary
+    from abs.studies.sl_paper import parse_paper_tables
+
+    cells = compare_tables(_summary(), parse_paper_tables(PAPER_EXAMPLE))
+    by_key = {(c.table, c.row, c.material): c for c in cells}
+    assert len(cells) == 4 + 2 + 8  # every published cell, abs's or not
+    one = by_key[("1", "icosphere 1", "blue-rubber")]
+    assert one.difference == pytest.approx(1.5 - 0.77)
+    assert one.within_2sd  # 0.73 <= 2 √(1.02² + 1²) = 2.86
+    # The paper's ideal row meets abs's error-free cell on the error study's subdivision (here 1).
+    assert by_key[("2", "ideal", "blue-rubber")].abs_mean == 1.5
+    vertex = by_key[("2", "vertex position 1 mm", "blue-rubber")]
+    assert vertex.difference == pytest.approx(2.0 - 0.66)
+    assert vertex.within_2sd  # 1.34 <= 2 √(1.15² + 0.5²) = 2.51
+    assert vertex.abs_repetition_sd == 0.25
+    assert vertex.paper_rise == pytest.approx(0.66 - 0.41) and vertex.abs_rise == pytest.approx(2.0 - 1.5)
+    assert by_key[("2", "vertex position 3 mm", "blue-rubber")].abs_mean is None
+    assert by_key[("1", "icosphere 5*", "purple-paint")].within_2sd is None
+    # A difference beyond two combined sds: abs 4.0 ± 0.5 against 0.66 ± 1.15.
+    far = _summary()
+    far["table2"]["vertex_position"]["1"]["blue-rubber"].update(mean=4.0)
+    far_cell = [c for c in compare_tables(far, parse_paper_tables(PAPER_EXAMPLE)) if c.row.startswith("vertex")
+                and c.material == "blue-rubber" and c.abs_mean is not None][0]
+    assert not far_cell.within_2sd and not far_cell.within_2sd_repetitions  # 3.34 > 2.51
+    counts = convention_summary(cells)
+    assert counts["table1"] == {"published": 4, "compared": 1, "within_pixel": 1, "within_repetition": 0,
+                                "error_cells": 0, "abs_higher": 1}
+    assert counts["abs_pixel_sd_over_mean"] == pytest.approx(0.25)
+    assert counts["abs_repetition_sd_over_mean"] == pytest.approx(0.125)
+
+
+def test_report_says_when_the_paper_file_is_absent(tmp_path, monkeypatch, capsys):
+    """Without ../shared the report and `abs study sl-paper` still work and say the file is missing;
+    with it, the report holds the published values beside abs's."""
+    from abs.cli.main import main
+    from abs.studies.sl_paper import parse_paper_tables
+    from abs.studies.sl_report import paper_markdown, write_html
+
+    summary = _summary()
+    study = tmp_path / "study.json"
+    study.write_text(json.dumps(summary))
+    monkeypatch.setenv("ABS_SHARED_DATA", str(tmp_path / "no-shared" / "data"))
+    assert main(["study", "sl-paper", "--study", str(study)]) == 0
+    out = capsys.readouterr().out
+    assert "were not found" in out and str(tmp_path / "no-shared" / "docs") in out
+    html = write_html(tmp_path / "report.html", summary, [], paper_markdown(summary, None, "x.md")).read_text()
+    assert "were not found (looked for x.md)" in html and "subdiv. 1" in html
+    # With the tables: each published cell beside abs's.
+    text = paper_markdown(summary, parse_paper_tables(PAPER_EXAMPLE, "example.md"))
+    assert "| vertex position 1 mm | blue-rubber | 0.66 ± 1.15 | 2.00 ± 0.50 | 0.25 | +1.34 | yes | yes | +0.25 / +0.50 |" in text
+    assert "<td>0.66 ± 1.15</td>" in write_html(tmp_path / "report.html", summary, [], text).read_text()
+    # An explicit file that does not exist is an error naming it.
+    assert main(["study", "sl-paper", "--study", str(study), "--paper-tables", str(tmp_path / "none.md")]) == 2
+    assert "none.md" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(not PAPER_FILE.is_file(), reason=f"{PAPER_FILE} not present (see ../shared/README.md)")
+def test_docs_show_the_comparison_of_the_committed_run():
+    """docs/sl-study.md's side-by-side tables are what the code makes of the committed full-size
+    run (benchmarks/results/sl_study.json) and the published file."""
+    from pathlib import Path
+
+    from abs.studies.sl_compare import compare_tables, markdown_comparison
+    from abs.studies.sl_paper import read_paper_tables
+
+    root = Path(__file__).resolve().parents[1]
+    summary = json.loads((root / "benchmarks" / "results" / "sl_study.json").read_text())
+    assert summary["config"]["repetitions"] == 30 and summary["config"]["width"] == 640
+    tables = markdown_comparison(compare_tables(summary, read_paper_tables(PAPER_FILE)))
+    assert tables in (root / "docs" / "sl-study.md").read_text()

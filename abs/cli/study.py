@@ -1,4 +1,5 @@
-"""``abs study sl-scanner --out DIR``: the structured-light variational study (docs/sl-study.md)."""
+"""``abs study sl-scanner --out DIR``: the structured-light variational study (docs/sl-study.md);
+``abs study sl-paper --study study.json``: its tables beside the paper's published ones."""
 
 from __future__ import annotations
 
@@ -30,7 +31,52 @@ def add_parser(sub) -> None:
     sl.add_argument("--workers", type=int, default=1, help="local worker processes")
     sl.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): run tasks there")
     sl.add_argument("--seed", type=int, default=0)
+    sl.add_argument("--paper-tables", type=Path, help="the paper's published tables (Markdown) to put "
+                                                      "beside abs's; default: ../shared/docs/"
+                                                      "sl-study-paper-tables.md when present")
     sl.set_defaults(run=run)
+    paper = studies.add_parser("sl-paper", help="an existing study's tables beside the paper's "
+                                                "published ones (Markdown)")
+    paper.add_argument("--study", type=Path, required=True, help="study.json of `abs study sl-scanner`")
+    paper.add_argument("--paper-tables", type=Path, help="default: ../shared/docs/sl-study-paper-tables.md")
+    paper.add_argument("--out", type=Path, help="Markdown file to write (default: print)")
+    paper.set_defaults(run=run_paper)
+
+
+def _paper_tables(path: Path | None) -> Path | None:
+    """The published tables' file: an explicit one must exist; the default may be absent."""
+    from abs.errors import InputError
+    from abs.studies.sl_paper import default_paper_tables_path
+
+    if path is not None and not path.is_file():
+        raise InputError(path, "--paper-tables", "file not found")
+    return path or default_paper_tables_path()
+
+
+def run_paper(args) -> int:
+    import json
+
+    from abs.errors import InputError
+    from abs.studies.sl_paper import read_paper_tables
+    from abs.studies.sl_report import paper_markdown
+
+    if not args.study.is_file():
+        raise InputError(args.study, "--study", "file not found")
+    try:
+        summary = json.loads(args.study.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise InputError(args.study, "", f"not JSON: {error}") from None
+    if not isinstance(summary, dict) or not isinstance(summary.get("table1"), dict) \
+            or not isinstance(summary.get("table2"), dict):
+        raise InputError(args.study, "table1", "not a study.json (needs the objects table1 and table2)")
+    path = _paper_tables(args.paper_tables)
+    text = paper_markdown(summary, read_paper_tables(path) if path.is_file() else None, missing=str(path))
+    if args.out is None:
+        print(text)
+    else:
+        args.out.write_text(text + "\n")
+        print(f"wrote {args.out}")
+    return 0
 
 
 def _list(text: str | None) -> list[str] | None:
@@ -84,6 +130,7 @@ def run(args) -> int:
                         ("--spp", args.spp), ("--score-size", args.score_size), ("--score-spp", args.score_spp)):
         if value < 1:
             raise InputError(None, name, f"must be >= 1, got {value}")
+    paper_tables = _paper_tables(args.paper_tables)
     basis = args.basis or _default_basis(args.out, materials, args.merl_dir)
     if not Path(basis).is_file():
         raise InputError(basis, "", "basis file not found (make one with `abs brdf build-basis`)")
@@ -107,8 +154,9 @@ def run(args) -> int:
         bar.total = to_run
         bar.update(finished - bar.n)
 
-    summary = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, on_result=progress)
+    summary = run_study(config, args.out, workers=args.workers, scheduler=args.scheduler, on_result=progress,
+                        paper_tables=paper_tables)
     bar.close()
-    print(f"wrote {args.out / 'study.json'}, table1.md, table2.md, report.html "
+    print(f"wrote {args.out / 'study.json'}, table1.md, table2.md, paper_comparison.md, report.html "
           f"({summary['runtime_s']:.0f} s, {summary['tasks_run']} tasks run)")
     return 0

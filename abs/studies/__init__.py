@@ -6,4 +6,6 @@
 - :mod:`abs.studies.sl_sampling`: BRDF samples from the images, with scanner errors.
 - :mod:`abs.studies.sl_scoring`: CIEDE2000 between tone-mapped renderings under an environment map.
 - :mod:`abs.studies.sl_scanner`: the variational study (Tables 1 and 2), run in parallel.
+- :mod:`abs.studies.sl_paper`: the paper's published Tables 1 and 2, read into the study's layout.
+- :mod:`abs.studies.sl_compare`: the published tables beside abs's, cell by cell.
 """

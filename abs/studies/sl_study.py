@@ -5,6 +5,8 @@ Folder layout::
     study.json        config, rig, Table 1 and Table 2 (JSON), runtime
     table1.md         Table 1 (paper layout) in Markdown
     table2.md         Table 2
+    paper_comparison.md      the paper's published tables beside abs's, cell by cell (or a note
+                             saying the file of published tables was not found)
     profile_<material>.png   45-degree in-plane profiles with ±2 sd bands
     report.html       both tables and the figures
     results/<task>.json      one file per finished task (the checkpoint: a rerun skips them)
@@ -19,6 +21,7 @@ from pathlib import Path
 
 from abs.io.fit_files import write_json
 from abs.studies.parallel import map_tasks
+from abs.studies.sl_paper import default_paper_tables_path, read_paper_tables
 from abs.studies.sl_rig import default_rig
 from abs.studies.sl_scanner import (
     StudyConfig,
@@ -49,7 +52,8 @@ def _load_done(folder: Path, tasks: list[dict]) -> dict[str, dict]:
 
 
 def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler: str | None = None,
-              on_result: Callable[[str, int, int], None] | None = None) -> dict:
+              on_result: Callable[[str, int, int], None] | None = None,
+              paper_tables: str | Path | None = None) -> dict:
     """Run (or resume) the study and write its folder (see the module docstring).
 
     Parameters
@@ -65,6 +69,10 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
     on_result : callable, optional
         Called as ``on_result(task_id, finished, to_run)`` after each task this call runs
         (progress reporting; tasks resumed from ``results/`` are not counted).
+    paper_tables : str or Path, optional
+        The paper's published tables (:mod:`abs.studies.sl_paper`); default
+        ``../shared/docs/sl-study-paper-tables.md``. When the file does not exist the report says
+        so and shows abs's tables alone; a malformed file is an InputError.
 
     Returns
     -------
@@ -72,6 +80,9 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
         The summary written to ``study.json``.
     """
     out = Path(out)
+    # Read (and check) the published tables before the long run, not after it.
+    paper_path = Path(paper_tables) if paper_tables is not None else default_paper_tables_path()
+    paper = read_paper_tables(paper_path) if paper_path.is_file() else None
     results_dir = out / "results"
     results_dir.mkdir(parents=True, exist_ok=True)
     tasks = study_tasks(config)
@@ -96,8 +107,10 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
     write_json(out / "study.json", summary)
     (out / "table1.md").write_text(markdown_table1(summary["table1"]) + "\n")
     (out / "table2.md").write_text(markdown_table2(summary["table2"]) + "\n")
-    from abs.studies.sl_report import plot_profiles, write_html
+    from abs.studies.sl_report import paper_markdown, plot_profiles, write_html
 
+    paper_text = paper_markdown(summary, paper, missing=str(paper_path))
+    (out / "paper_comparison.md").write_text(paper_text + "\n")
     figures = [plot_profiles(out / f"profile_{m}.png", m, results, keyed) for m in config.materials]
-    write_html(out / "report.html", summary, figures)
+    write_html(out / "report.html", summary, figures, paper_text)
     return summary
