@@ -22,8 +22,11 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
 
     ``mode``: how the AD derivative is taken:
 
-    - ``"forward"``: :meth:`CompiledScene.render_forward` (tangents inside the path loop; what
-      fits use for Jacobians), silhouette boundary terms included;
+    - ``"forward"``: :meth:`CompiledScene.render_forward` (what fits use for Jacobians: tangents
+      inside the path loop, silhouette boundary terms included; central differences with common
+      random numbers for an IOR);
+    - ``"tangents"``: :meth:`CompiledScene.render_forward` with ``differences=False`` (forward
+      mode for every parameter, an IOR included);
     - ``"replay"``: :meth:`CompiledScene.render_backward` (path replay; what gradients of
       parameters that do not move paths use);
     - ``"recorded"``: ``dr.backward`` through a recorded render. ``edges=False`` leaves the
@@ -44,9 +47,9 @@ def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4,
                             .astype(np.float64) * weights_np))
 
     def derivative(seed):
-        if mode == "forward":
+        if mode in ("forward", "tangents"):
             _, d = compiled.render_forward(camera, {name: direction}, spp=spp, seed=seed,
-                                           max_depth=max_depth)
+                                           max_depth=max_depth, differences=mode == "forward")
             return float(np.sum(d.numpy().astype(np.float64) * weights_np))
         if mode == "replay":
             _, g = compiled.render_backward(camera, weights_np, [name], spp=spp, seed=seed,

@@ -51,8 +51,38 @@ def test_ior_per_channel(glass_scene_dir, channel):
     camera = Camera(intrinsics_from_fov(W, H, np.radians(25)), R, t, W, H)
     weights = mi.TensorXf(np.random.default_rng(3).uniform(0, 1, (H, W, 3)).astype(np.float32))
     res = directional_gradient(compiled, camera, "glass.ior", np.eye(3)[channel], 0.02, weights,
-                               seeds=6, spp=128)
+                               seeds=6, spp=128, mode="tangents")
     assert_gradients_agree(*res, rel=0.1)
+
+
+def test_ior_through_textured_scene(setup):
+    """The IOR derivative fits use, with edges of the floor and the checkerboard seen through the
+    glass (whose boundary terms forward mode leaves out), against finite differences of
+    *independent* renders (no common random numbers, so the reference shares nothing with the
+    estimator). Measured on a 48x48 view: forward mode 139 +- 10, the estimator 176 +- 3, and
+    independent differences 166 +- 5 (h = 0.03) and 164 +- 4 (h = 0.04)."""
+    compiled, camera, _ = setup
+    x0 = compiled.get("glass.ior").copy()
+
+    def render(ior, spp, seed):
+        compiled.set("glass.ior", mi.Float(np.full(3, ior, np.float32)))
+        return compiled.render(camera, spp=spp, seed=seed).numpy().astype(np.float64)
+
+    try:
+        # Weights along the image's change with IOR (a residual's direction), so that the
+        # compared sums are large against their noise.
+        weights = render(x0[1] + 0.03, 512, 101) - render(x0[1] - 0.03, 512, 102)
+        compiled.set("glass.ior", mi.Float(np.full(3, x0[1], np.float32)))
+        estimates = [float(np.sum(compiled.render_forward(camera, {"glass.ior": np.ones(3)}, spp=64,
+                                                          seed=s)[1].numpy() * weights))
+                     for s in range(6)]
+        reference = [float(np.sum((render(x0[1] + 0.03, 128, 10 + s) - render(x0[1] - 0.03, 128, 20 + s))
+                                  * weights)) / 0.06 for s in range(6)]
+    finally:
+        compiled.set("glass.ior", mi.Float(x0.astype(np.float32)))
+    se = lambda v: float(np.std(v, ddof=1) / np.sqrt(len(v)))  # noqa: E731
+    assert_gradients_agree(np.mean(estimates), se(estimates), np.mean(reference), se(reference),
+                           rel=0.1)
 
 
 def test_environment_scale(setup):

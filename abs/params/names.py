@@ -38,6 +38,9 @@ class Parameter:
     separable_channels : bool
         Per-channel parameter whose channel ``c`` changes image channel ``c`` only (one forward
         render gives its three Jacobian columns).
+    difference_step : float or None
+        Derivatives by common-random-number central differences of this step (parameter units)
+        rather than forward mode (see :class:`abs.scene.materials.base.ParameterSpec`).
     """
 
     name: str
@@ -48,6 +51,7 @@ class Parameter:
     initial: np.ndarray | None
     moves_paths: bool = False
     separable_channels: bool = False
+    difference_step: float | None = None
 
     @property
     def owner(self) -> str:
@@ -78,7 +82,8 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             initial = material.value(field) if spec.size != -1 and field in material._toml else None
             specs[f"{name}.{field}"] = Parameter(f"{name}.{field}", spec.size, spec.unit,
                                                  spec.lower, spec.upper, initial, spec.moves_paths,
-                                                 spec.separable_channels and spec.size == 3)
+                                                 spec.separable_channels and spec.size == 3,
+                                                 spec.difference_step)
     for obj in scene.objects:
         specs[f"{obj.name}.pose"] = Parameter(f"{obj.name}.pose", 6, "m, m, m, rad, rad, rad",
                                               -INF, INF, np.asarray(obj.pose, dtype=np.float64),

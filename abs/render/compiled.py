@@ -285,7 +285,8 @@ class CompiledScene:
         return dr.detach(recorded), mi.TensorXf(derivative)
 
     def render_forward(self, camera: Camera, tangents: dict, spp: int | None = None, seed: int = 0,
-                       max_depth: int | None = None) -> tuple[mi.TensorXf, mi.TensorXf]:
+                       max_depth: int | None = None,
+                       differences: bool = True) -> tuple[mi.TensorXf, mi.TensorXf]:
         """A rendering and its derivative along ``tangents``, by forward mode inside the path loop.
 
         Parameters
@@ -293,6 +294,11 @@ class CompiledScene:
         tangents : dict of str to array-like
             Parameter name to its tangent (the direction of change, in the parameter's units);
             parameters not named are held fixed.
+        differences : bool
+            Parameters with a ``difference_step`` (an IOR) take their derivative from central
+            differences with common random numbers (:meth:`_central_difference`), which include
+            the boundary terms of edges seen through refraction. ``False``: forward mode for
+            every parameter (tangents inside the path loop; exact for glass that sees no edges).
 
         Returns
         -------
@@ -301,10 +307,21 @@ class CompiledScene:
             gives the same samples as :meth:`render` (common random numbers) when no dispersive
             glass is being differentiated.
         """
+        spp = spp or self.scene.render.spp
+        differenced = {n: np.asarray(t, np.float64) for n, t in tangents.items()
+                       if differences and self._spec(n).difference_step is not None
+                       and np.any(np.asarray(t) != 0)}
+        if differenced:
+            traced = {n: t for n, t in tangents.items() if n not in differenced}
+            if any(np.any(np.asarray(t) != 0) for t in traced.values()):
+                image, derivative = self.render_forward(camera, traced, spp, seed, max_depth)
+            else:
+                image, derivative = self.render(camera, spp, seed, max_depth), None
+            difference = self._central_difference(camera, differenced, spp, seed, max_depth, image)
+            return image, difference if derivative is None else derivative + difference
         self._push_tangents(tangents)
         try:
             tracer = self._tracer(max_depth)
-            spp = spp or self.scene.render.spp
             batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
             image = derivative = None
             for i, n in enumerate(batches):
@@ -319,6 +336,43 @@ class CompiledScene:
         finally:
             for name in tangents:
                 self.set(name, from_numpy(mi.Float, self.get(name)))
+
+    def _central_difference(self, camera: Camera, tangents: dict, spp: int, seed: int,
+                            max_depth: int | None, image) -> mi.TensorXf:
+        """``d image / d p . tangent`` by central differences with common random numbers, for
+        parameters with a ``difference_step`` (:class:`~abs.params.names.Parameter`).
+
+        The step ``h`` moves the parameter with the largest tangent by its ``difference_step``.
+        With the same samples at ``p +- h t``, a sample whose path keeps its structure contributes
+        its smooth change, and one that crosses an edge seen through the glass contributes the
+        jump: together the exact derivative of the image averaged over ``[p - h t, p + h t]``,
+        boundary terms included, which forward mode leaves out. A step that would leave the
+        parameter's bounds becomes one-sided, from ``image`` (the render at ``p``).
+        """
+        base = {n: self.get(n).astype(np.float64) for n in tangents}
+        h = min(self._spec(n).difference_step / float(np.max(np.abs(t))) for n, t in tangents.items())
+
+        def inside(sign):
+            return all(np.all((self._spec(n).lower <= base[n] + sign * h * t)
+                              & (base[n] + sign * h * t <= self._spec(n).upper))
+                       for n, t in tangents.items())
+
+        def at(sign):
+            for n, t in tangents.items():
+                self.set(n, from_numpy(mi.Float, (base[n] + sign * h * t).astype(np.float32)))
+            return self.render(camera, spp, seed, max_depth)
+
+        try:
+            signs = [s for s in (1, -1) if inside(s)] or [1]
+            upper = at(signs[0]) if signs[0] == 1 else image
+            lower = at(-1) if -1 in signs else image
+            width = h * (2 if len(signs) == 2 else 1)
+            result = (upper - lower) / opaque(mi.Float, width)
+            dr.eval(result)
+            return result
+        finally:
+            for n in tangents:
+                self.set(n, from_numpy(mi.Float, base[n].astype(np.float32)))
 
     def render_backward(self, camera: Camera, weight, names, spp: int | None = None, seed: int = 0,
                         max_depth: int | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:

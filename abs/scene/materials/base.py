@@ -44,6 +44,13 @@ class ParameterSpec:
         For a per-channel field (size 3): whether its channel ``c`` changes channel ``c`` of the
         image only (an absorption or IOR per colour channel, a reflectance colour). Then one
         forward-mode render along (1, 1, 1) gives all three Jacobian columns, channel by channel.
+    difference_step : float or None
+        When set, derivatives come from central differences of this step (in the field's unit)
+        with common random numbers instead of forward mode: for fields that move the
+        discontinuities seen *through* refraction (an IOR moves every edge and shadow seen through
+        the glass). Forward mode leaves those edges' boundary terms out; the difference is the
+        exact derivative of the image smoothed over +-step (a mollified derivative), boundaries
+        at any depth included (see docs/renderer.md).
     """
 
     field: str
@@ -54,6 +61,7 @@ class ParameterSpec:
     mitsuba_key: str | None
     moves_paths: bool = False
     separable_channels: bool = False
+    difference_step: float | None = None
 
 
 class Material(ABC):

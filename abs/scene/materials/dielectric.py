@@ -28,8 +28,11 @@ class Dielectric(Material):
 
     def parameters(self) -> dict[str, ParameterSpec]:
         return {
+            # Step 0.02: the Jacobian steers a fit but does not set where it stops (where the
+            # residual is small), so smoothing over +-0.02 costs no accuracy; on a glass sphere
+            # before a checkerboard it had about 2x less variance than 0.01, 3x less than 0.003.
             "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior", moves_paths=True,
-                                 separable_channels=True),
+                                 separable_channels=True, difference_step=0.02),
             "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption",
                                         separable_channels=True),
             "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True),
