@@ -38,7 +38,7 @@ DEFAULT_SCENE = ROOT / "scenes/default/scene.toml"
 
 # Run in a child process: one measurement, printed as JSON on the last line.
 _CHILD = textwrap.dedent('''
-    import json, resource, sys, time
+    import json, sys, time
     import numpy as np
     import abs.render
     import drjit as dr, mitsuba as mi
@@ -50,7 +50,13 @@ _CHILD = textwrap.dedent('''
     compiled = compile_scene(load_scene(scene_path))
     view = place_cameras(compiled, 1, width, height)[0]
     camera = Camera(view["K"], view["R"], view["t"], width, height)
-    rss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    def rss():  # this process's peak resident memory since the last reset, MB (Linux)
+        for line in open("/proc/self/status"):
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024.0
+    def reset_peak():  # loading the scene peaks above a render; count from here (Linux >= 4.0)
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
     out = {}
     if task == "abs_first":
         start = time.perf_counter(); compiled.render(camera, spp=spp).numpy()
@@ -61,6 +67,7 @@ _CHILD = textwrap.dedent('''
         start = time.perf_counter(); np.array(mi.render(scene, spp=spp))
         out["seconds"] = time.perf_counter() - start
     else:  # memory of a derivative render, above the compiled scene's footprint
+        reset_peak()
         base = rss()
         if task == "gradient":
             compiled.render_backward(camera, np.ones((height, width, 3)), ["glass.absorption"], spp=spp)
@@ -143,6 +150,8 @@ def measured_material_scene(folder: Path) -> Path:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smaller images and no 256-spp memory row")
+    parser.add_argument("--size", default=None, help="WxH of the speed rows (default 200x150; a GPU "
+                        "needs larger images to be busy)")
     args = parser.parse_args()
 
     import drjit as dr
@@ -156,6 +165,8 @@ def main() -> None:
 
     record: dict = {"variant": None, "machine": platform.machine(), "cpu_count": os.cpu_count()}
     w, h = (100, 75) if args.quick else (200, 150)
+    if args.size:
+        w, h = (int(v) for v in args.size.lower().split("x"))
 
     # ---- compile: fresh processes, empty kernel caches
     compile_rows = []
@@ -251,12 +262,15 @@ def main() -> None:
             print(f"memory {task:15s} 640x480 {n:4d} spp: +{m['peak_mb'] - m['base_mb']:.0f} MB "
                   f"(footprint {m['base_mb']:.0f} MB)", flush=True)
     record["memory"] = memory
-    record["gpu"] = "not measured: no CUDA device was available to this run" \
-        if not mi.variant().startswith("cuda") else mi.variant()
+    # Host memory only: on a CUDA variant the images live on the GPU, which this does not measure.
+    record["memory_kind"] = "peak resident memory above the compiled scene's, MB"
+    record["gpu"] = mi.variant() if mi.variant().startswith("cuda") else \
+        "not measured: no CUDA device was available to this run"
 
     out = ROOT / "benchmarks/results"
     out.mkdir(parents=True, exist_ok=True)
-    name = "render_speed_quick.json" if args.quick else "render_speed.json"
+    name = "render_speed" + ("_cuda" if mi.variant().startswith("cuda") else "") \
+        + ("_quick" if args.quick else "") + ".json"
     (out / name).write_text(json.dumps(record, indent=2))
     print(f"saved {out / name}\n")
     print("\n".join(markdown_table(record)))
