@@ -10,6 +10,7 @@ from abs.scene.materials.base import Material, ParameterSpec, register
 @register
 class Dielectric(Material):
     type_name = "dielectric"
+    transmissive = True
 
     @classmethod
     def from_fields(cls, name: str, fields: Fields) -> "Dielectric":
@@ -30,7 +31,9 @@ class Dielectric(Material):
         return {
             "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior", moves_paths=True,
                                  separable_channels=True),
+            # Null values: clear glass, polished surfaces (the diagnosis adds either effect there).
             "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption",
-                                        separable_channels=True),
-            "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True),
+                                        separable_channels=True, null=0.0),
+            "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True,
+                                       null=0.0),
         }
