@@ -139,7 +139,7 @@ def _pose_field(fields: Fields, name: str) -> SceneError:
     """The error for a material field named ``pose``, which would share its parameter name with
     an object's pose (``<name>.pose``): the contract reserves that name for objects."""
     return fields.error(POSE_FIELD, f"a material may not have a field named {POSE_FIELD!r}: "
-                                    f"parameter '{name}.{POSE_FIELD}' names the pose of an object "
+                                    f"parameter '{name}.{POSE_FIELD}' would name the pose of an object "
                                     f"called {name!r} (objects and materials may share names)")
 
 
