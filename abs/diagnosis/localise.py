@@ -100,11 +100,13 @@ def pixel_objects(compiled, camera: Camera) -> tuple[np.ndarray, tuple[str, ...]
     valid = np.array(si.is_valid(), bool)
     labels = np.full(w * h, -1, np.int32)
     names = []
-    materials = {o.name: o.material for o in compiled.scene.objects}
+    # Shape ids are object names unless a material shares the name (CompiledScene.shape_ids).
+    objects = {compiled.shape_ids[o.name]: o for o in compiled.scene.objects}
     for k, shape in enumerate(compiled.mitsuba_scene.shapes()):
         hit = np.array(si.shape == mi.ShapePtr(shape), bool) & valid
         labels[hit] = k
-        names.append(f"{shape.id()} ({materials.get(shape.id(), '?')})")
+        obj = objects.get(shape.id())
+        names.append(f"{shape.id()} (?)" if obj is None else f"{obj.name} ({obj.material})")
     return labels.reshape(h, w), tuple(names)
 
 

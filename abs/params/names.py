@@ -1,19 +1,33 @@
 """The catalogue of a scene's differentiable parameters.
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
-``environment.rotation``, ``environment.inverse_distance``, ``sensor.<field>``, ``<object>.pose``. Each has a size (3 for per-channel quantities), a
-unit and physical bounds; fitting code (later) maps bounds to unconstrained variables.
+``environment.rotation``, ``environment.inverse_distance``, ``sensor.<field>``, ``<object>.pose``.
+Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
+bounds to unconstrained variables.
+
+A material and an object may share a name (a ``cloth`` material on a ``cloth`` object):
+``pose`` is an object's only parameter and no material may have a field of that name, so
+``cloth.pose`` is the object's and every other ``cloth.<field>`` the material's.
+
+Each :class:`Parameter` carries what its owner knows about it: its null value (where the effect it
+models is absent, if it models one) and its setter (how it is written into a compiled scene), so
+neither :class:`~abs.render.CompiledScene` nor the diagnosis effects branch on who owns it.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Parameter", "parameter_specs"]
+from abs.params.setters import AttributeSetter, PoseSetter, Setter
+
+__all__ = ["Parameter", "parameter_specs", "POSE_FIELD"]
 
 INF = float("inf")
+
+POSE_FIELD = "pose"
+"""An object's one parameter, ``<object>.pose``; reserved: no material may have a field so named."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +55,15 @@ class Parameter:
     difference_step : float or None
         Derivatives by common-random-number central differences of this step (parameter units)
         rather than forward mode (see :class:`abs.scene.materials.base.ParameterSpec`).
+    null : ndarray or None
+        The value at which the parameter's effect is absent and the rendering is exactly the
+        model without it (a roughness of 0, a pose of zeros, a linear response), ``size``
+        entries; ``None`` for a parameter that is a quantity of the model rather than an
+        extension of it (a reflectance, an IOR). See ``docs/scene-format.md``.
+    setter : Setter or None
+        Writes a (Dr.Jit) value into a :class:`~abs.render.CompiledScene`; ``setter(compiled,
+        value)``. Supplied by the parameter's owner, so a new owner (a material type) brings its
+        own and the compiled scene does not change.
     """
 
     name: str
@@ -52,6 +75,8 @@ class Parameter:
     moves_paths: bool = False
     separable_channels: bool = False
     difference_step: float | None = None
+    null: np.ndarray | None = field(default=None, compare=False)
+    setter: Setter | None = field(default=None, compare=False, repr=False)
 
     @property
     def owner(self) -> str:
@@ -61,31 +86,51 @@ class Parameter:
     def field(self) -> str:
         return self.name.split(".", 1)[1]
 
+    def at_null(self, value=None) -> bool:
+        """Whether ``value`` (the scene file's, by default) is the null value; ``False`` for a
+        parameter without one."""
+        value = self.initial if value is None else value
+        if self.null is None or value is None:
+            return False
+        return bool(np.array_equal(np.asarray(value, np.float64).ravel(), self.null))
+
+
+def _null(value, size: int) -> np.ndarray | None:
+    return None if value is None else np.full(size, float(value))
+
 
 def parameter_specs(scene) -> dict[str, Parameter]:
     """All differentiable parameters of a :class:`~abs.scene.scene.Scene`, by name."""
     env = scene.environment
     specs = {
-        "environment.scale": Parameter("environment.scale", 1, "1", 0.0, INF, np.array([env.scale])),
+        "environment.scale": Parameter("environment.scale", 1, "1", 0.0, INF, np.array([env.scale]),
+                                       setter=AttributeSetter("environment", "scale")),
         "environment.rotation": Parameter("environment.rotation", 1, "rad", -INF, INF,
-                                          np.array([env.rotation])),
-        "environment.inverse_distance": Parameter("environment.inverse_distance", 1, "1/m", 0.0, INF,
-                                                  np.array([env.inverse_distance])),
+                                          np.array([env.rotation]),
+                                          setter=AttributeSetter("environment", "rotation")),
+        # 1/R = 0 puts the map at infinity: no parallax, the plain model.
+        "environment.inverse_distance": Parameter(
+            "environment.inverse_distance", 1, "1/m", 0.0, INF, np.array([env.inverse_distance]),
+            null=np.zeros(1), setter=AttributeSetter("environment", "inverse_distance")),
     }
-    for field, (size, unit, lower, upper, _) in type(scene.sensor).FIELDS.items():
+    for field_name, (size, unit, lower, upper, null) in type(scene.sensor).FIELDS.items():
         # A response exponent and a stray-light level per channel act on their channel alone.
-        specs[f"sensor.{field}"] = Parameter(f"sensor.{field}", size, unit, lower, upper,
-                                             np.asarray(getattr(scene.sensor, field), np.float64),
-                                             separable_channels=field in ("response", "stray_light"))
+        specs[f"sensor.{field_name}"] = Parameter(
+            f"sensor.{field_name}", size, unit, lower, upper,
+            np.asarray(getattr(scene.sensor, field_name), np.float64),
+            separable_channels=field_name in ("response", "stray_light"),
+            null=_null(null, size), setter=AttributeSetter("sensor", field_name))
     for name, material in scene.materials.items():
-        for field, spec in material.parameters().items():
-            initial = material.value(field) if spec.size != -1 and field in material._toml else None
-            specs[f"{name}.{field}"] = Parameter(f"{name}.{field}", spec.size, spec.unit,
-                                                 spec.lower, spec.upper, initial, spec.moves_paths,
-                                                 spec.separable_channels and spec.size == 3,
-                                                 spec.difference_step)
+        for field_name, spec in material.parameters().items():
+            initial = material.value(field_name) if spec.size != -1 and field_name in material._toml else None
+            specs[f"{name}.{field_name}"] = Parameter(
+                f"{name}.{field_name}", spec.size, spec.unit, spec.lower, spec.upper, initial,
+                spec.moves_paths, spec.separable_channels and spec.size == 3,
+                spec.difference_step,
+                null=_null(spec.null, spec.size), setter=material.setter(field_name))
     for obj in scene.objects:
-        specs[f"{obj.name}.pose"] = Parameter(f"{obj.name}.pose", 6, "m, m, m, rad, rad, rad",
-                                              -INF, INF, np.asarray(obj.pose, dtype=np.float64),
-                                              moves_paths=True)
+        specs[f"{obj.name}.{POSE_FIELD}"] = Parameter(
+            f"{obj.name}.{POSE_FIELD}", 6, "m, m, m, rad, rad, rad", -INF, INF,
+            np.asarray(obj.pose, dtype=np.float64), moves_paths=True, null=np.zeros(6),
+            setter=PoseSetter(obj.name))
     return specs

@@ -19,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.errors import SceneError
-from abs.params.names import Parameter, parameter_specs
+from abs.params.names import POSE_FIELD, Parameter, parameter_specs
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
 from abs.render.camera import Camera
 from abs.render.edges import MovingMesh, edge_adjacency
@@ -29,7 +29,7 @@ from abs.render.jit import from_numpy, opaque
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
-__all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
+__all__ = ["CompiledScene", "compile_scene", "rotation_matrix", "shape_ids"]
 
 # Camera samples per launch. Every render mode (primal, forward, replay) splits spp alike, so
 # the same seed gives the same samples in each; 2^21 keeps the forward mode's doubled loop state
@@ -56,6 +56,19 @@ def _mesh_dict(obj) -> dict:
             "bsdf": {"type": "ref", "id": obj.material}}
 
 
+def shape_ids(scene: Scene) -> dict[str, str]:
+    """The Mitsuba id of each object's shape, by object name.
+
+    The object's name, unless a material has the same name: the scene-file contract allows that
+    (``cloth.pose`` is the object's parameter, every other ``cloth.<field>`` the material's), but
+    Mitsuba keeps BSDFs and shapes in one namespace of ids. The shape then becomes
+    ``<name>:object``; ``:`` cannot occur in a scene-file name, so no other id can equal it.
+    BSDF ids are always the material names (``<material>.<mitsuba_key>`` parameter keys).
+    """
+    return {obj.name: f"{obj.name}:object" if obj.name in scene.materials else obj.name
+            for obj in scene.objects}
+
+
 class CompiledScene:
     """A scene ready to render and differentiate. Build it with :func:`compile_scene`."""
 
@@ -64,6 +77,7 @@ class CompiledScene:
 
         self.scene = scene
         self.specs: dict[str, Parameter] = parameter_specs(scene)
+        self.shape_ids: dict[str, str] = shape_ids(scene)
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
                                        spec.inverse_distance, spec.center)
@@ -72,8 +86,9 @@ class CompiledScene:
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}
         for obj in scene.objects:
-            pos = np.array(self.params[f"{obj.name}.vertex_positions"]).reshape(-1, 3)
-            normals_key = f"{obj.name}.vertex_normals"
+            sid = self.shape_ids[obj.name]
+            pos = np.array(self.params[f"{sid}.vertex_positions"]).reshape(-1, 3)
+            normals_key = f"{sid}.vertex_normals"
             normals = (np.array(self.params[normals_key]).reshape(-1, 3)
                        if normals_key in self.params and dr.width(self.params[normals_key]) else None)
             self._rest[obj.name] = (pos, normals, pos.mean(axis=0))
@@ -85,9 +100,9 @@ class CompiledScene:
                 self.values[name] = opaque(mi.Float, np.asarray(p.initial, np.float32))
         for obj in scene.objects:
             if np.any(obj.pose != 0):
-                self.set(f"{obj.name}.pose", from_numpy(mi.Float, obj.pose))
+                self.set(f"{obj.name}.{POSE_FIELD}", from_numpy(mi.Float, obj.pose))
         for name, material in scene.materials.items():
-            for field, mspec in material.parameters().items():
+            for field in material.parameters():
                 # Every value goes through set() once: Mitsuba builds plugins with their values as
                 # kernel literals, and the first set() would otherwise compile every kernel anew.
                 # (brdf_pca computes its table from the coefficients here.)
@@ -108,13 +123,15 @@ class CompiledScene:
             raise SceneError(self.scene.source, "", f"Mitsuba could not build the scene: {exc}") from None
 
     def mitsuba_dict(self, include_environment: bool = True) -> dict:
-        """The scene as a Mitsuba dictionary (BSDFs with material names as ids, shapes with object
-        names as ids), for use with stock Mitsuba integrators and sensors."""
+        """The scene as a Mitsuba dictionary (BSDFs with material names as ids, shapes with the ids
+        of :attr:`shape_ids`: object names, unless a material shares one), for use with stock
+        Mitsuba integrators and sensors."""
         d: dict = {"type": "scene"}
         for name, material in self.scene.materials.items():
             d[name] = {**material.to_mitsuba(), "id": name}
         for obj in self.scene.objects:
-            d[obj.name] = {**_mesh_dict(obj), "id": obj.name}
+            sid = self.shape_ids[obj.name]
+            d[sid] = {**_mesh_dict(obj), "id": sid}
         if include_environment:
             d["environment"] = self.environment.mitsuba_dict()
         return d
@@ -135,34 +152,23 @@ class CompiledScene:
         if spec.size > 0 and dr.width(value) != spec.size:
             raise ValueError(f"{name}: expected {spec.size} values, got {dr.width(value)}")
         self.values[name] = value
-        owner, field = spec.owner, spec.field
-        env = self.environment
-        if name == "environment.scale":
-            env.scale = value
-        elif name == "environment.rotation":
-            env.rotation = value
-        elif name == "environment.inverse_distance":
-            env.inverse_distance = value
-        elif owner == "sensor":
-            setattr(self.sensor, field, value)
-        elif field == "pose":
-            self._set_pose(owner, value)
-        else:
-            material = self.scene.materials[owner]
-            mspec = material.parameters()[field]
-            if mspec.mitsuba_key is None:
-                material.apply(field, value, self.params)
-            else:
-                key = f"{owner}.{mspec.mitsuba_key}"
-                target = self.params[key]
-                if isinstance(target, mi.TensorXf):
-                    self.params[key] = mi.TensorXf(value, target.shape)
-                elif isinstance(target, mi.Float):
-                    self.params[key] = value if dr.width(target) == dr.width(value) else value[0]
-                else:
-                    self.params[key] = type(target)(*[dr.gather(mi.Float, value, i) for i in range(3)]) \
-                        if dr.width(value) == 3 else type(target)(value)
+        # The parameter's owner chose how it is written (abs.params.setters): environment and
+        # sensor members, a pose, a Mitsuba key, or the material's own binding.
+        spec.setter(self, value)
         self.params.update()
+
+    def write_mitsuba(self, key: str, value: mi.Float) -> None:
+        """Write ``value`` into the Mitsuba scene parameter ``key`` (``glass.ior``), converted to
+        its type: a tensor keeps its shape, a one-value ``Float`` takes the first entry, a colour
+        takes three entries (or one for all channels). :meth:`update` is left to the caller."""
+        target = self.params[key]
+        if isinstance(target, mi.TensorXf):
+            self.params[key] = mi.TensorXf(value, target.shape)
+        elif isinstance(target, mi.Float):
+            self.params[key] = value if dr.width(target) == dr.width(value) else value[0]
+        else:
+            self.params[key] = type(target)(*[dr.gather(mi.Float, value, i) for i in range(3)]) \
+                if dr.width(value) == 3 else type(target)(value)
 
     def _mitsuba_value(self, name: str):
         spec = self._spec(name)
@@ -170,7 +176,10 @@ class CompiledScene:
         target = self.params[f"{spec.owner}.{mspec.mitsuba_key}"]
         return target.array if isinstance(target, mi.TensorXf) else target
 
-    def _set_pose(self, obj: str, pose: mi.Float) -> None:
+    def set_pose(self, obj: str, pose: mi.Float) -> None:
+        """Move object ``obj``'s mesh rigidly to ``pose`` (``[tx, ty, tz, rx, ry, rz]``, metres
+        and a rotation vector about the mesh's centroid; ``docs/conventions.md``) from where the
+        scene file puts it. Use :meth:`set` (``<obj>.pose``), which records the value."""
         pos, normals, centre = self._rest[obj]
         t = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3)])
         r = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])
@@ -179,10 +188,11 @@ class CompiledScene:
         p = mi.Vector3f(*[from_numpy(mi.Float, pos[:, i]) for i in range(3)])
         positions = dr.ravel(rot @ (p - c) + c + t)
         self._posed[obj] = positions
-        self.params[f"{obj}.vertex_positions"] = positions
+        sid = self.shape_ids[obj]
+        self.params[f"{sid}.vertex_positions"] = positions
         if normals is not None:
             nrm = mi.Vector3f(*[from_numpy(mi.Float, normals[:, i]) for i in range(3)])
-            self.params[f"{obj}.vertex_normals"] = dr.ravel(rot @ nrm)
+            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ nrm)
 
     def _spec(self, name: str) -> Parameter:
         if name not in self.specs:
@@ -197,7 +207,8 @@ class CompiledScene:
             if value is None or not dr.grad_enabled(value):
                 continue
             if obj.name not in self._adjacency:
-                faces = np.array(self.params[f"{obj.name}.faces"], np.int64).reshape(-1, 3)
+                faces = np.array(self.params[f"{self.shape_ids[obj.name]}.faces"],
+                                 np.int64).reshape(-1, 3)
                 self._adjacency[obj.name] = (faces, *edge_adjacency(faces))
             faces, edges, edge_faces = self._adjacency[obj.name]
             out.append(MovingMesh(self._posed[obj.name], edges, edge_faces, faces))
@@ -212,7 +223,7 @@ class CompiledScene:
             value = self.values.get(f"{obj.material}.subsurface")
             if value is None or not (dr.grad_enabled(value) or float(dr.detach(value)[0]) > 0.0):
                 continue
-            out.append((mi.ShapePtr(shapes[obj.name]), value))
+            out.append((mi.ShapePtr(shapes[self.shape_ids[obj.name]]), value))
         return out
 
     # -------------------------------------------------------------- render

@@ -107,14 +107,15 @@ def render_with_medium(compiled, camera, material: str, mean_free_path: float,
     for obj in compiled.scene.objects:
         if obj.material != material:
             continue
-        box = shapes[obj.name].bbox()
+        sid = compiled.shape_ids[obj.name]  # the object's name unless a material shares it
+        box = shapes[sid].bbox()
         lo, hi = np.array(box.min, float).ravel(), np.array(box.max, float).ravel()
         if hi[1] - lo[1] > 1e-6:
             raise ValueError(f"{obj.name}: render_with_medium needs a flat object in a plane y = const")
         top = lo[1]
         centre = [(lo[0] + hi[0]) / 2, top - thickness / 2, (lo[2] + hi[2]) / 2]
         half = [(hi[0] - lo[0]) / 2, thickness / 2, (hi[2] - lo[2]) / 2]
-        del d[obj.name]
+        del d[sid]
         d[obj.name + "_slab"] = {
             "type": "cube", "to_world": mi.ScalarTransform4f().translate(centre).scale(half),
             "bsdf": {"type": "null"},

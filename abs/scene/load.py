@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from abs.errors import SceneError
+from abs.params.names import POSE_FIELD
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
@@ -85,7 +86,11 @@ def load_scene(path: str | Path) -> Scene:
         if cls is None:
             raise fields.error("type", f"unknown material type {type_name!r}; known types: "
                                        f"{', '.join(material_types())}")
+        if fields.has(POSE_FIELD):
+            raise _pose_field(fields, name)
         materials[name] = cls.from_fields(name, fields)
+        if POSE_FIELD in materials[name].parameters():  # a material type that declares one
+            raise _pose_field(fields, name)
         materials[name]._files = fields.files_below()
     if not materials:
         raise mat_fields.error("", "no materials defined")
@@ -100,10 +105,9 @@ def load_scene(path: str | Path) -> Scene:
         fields = Fields(raw, source, f"objects[{i}]")
         fields.check_known({"name", "mesh", "material", "to_world", "pose"})
         name = fields.string("name")
+        # An object may share its material's name (a "cloth" object of material "cloth"): its
+        # one parameter is <name>.pose, and no material has a field named pose.
         _check_name(fields, "name", name, "object")
-        if name in materials:
-            raise fields.error("name", f"object name {name!r} is also a material name; parameter "
-                                       "names would be ambiguous")
         if any(o.name == name for o in objects):
             raise fields.error("name", f"duplicate object name {name!r}")
         material = fields.string("material")
@@ -129,6 +133,14 @@ def load_scene(path: str | Path) -> Scene:
     known = parameter_specs(scene)
     return replace(scene, fit_parameters=_fit_parameters(fit_fields, known),
                    fit_priors=_fit_priors(fit_fields, known))
+
+
+def _pose_field(fields: Fields, name: str) -> SceneError:
+    """The error for a material field named ``pose``, which would share its parameter name with
+    an object's pose (``<name>.pose``): the contract reserves that name for objects."""
+    return fields.error(POSE_FIELD, f"a material may not have a field named {POSE_FIELD!r}: "
+                                    f"parameter '{name}.{POSE_FIELD}' would name the pose of an object "
+                                    f"called {name!r} (objects and materials may share names)")
 
 
 def _sensor(fields: Fields) -> SensorSpec:

@@ -166,9 +166,10 @@ def _material_table(material: Material, folder: Path, values: dict[str, object])
         # A file the material resolved but does not write back is not ours to add.
         if isinstance(sub, dict) and isinstance(sub.get(last), str):
             sub[last] = _relative(path, folder)
+    fields = material.parameters()  # not <name>.pose, an object's when one shares the name
     for name, value in values.items():
         owner, field = name.split(".", 1)
-        if owner == material.name:
+        if owner == material.name and field in fields:
             table[field] = value
     return table
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, register
+from abs.diagnosis.effects.base import Effect, missing, register
 
 
 @register
@@ -12,9 +12,9 @@ class Absorption(Effect):
     name = "absorption"
 
     def targets(self, scene, compiled) -> list[str]:
+        # Glass with an absorption field at its null value (clear), whatever its material type.
         return [name for name, m in scene.materials.items()
-                if m.type_name == "dielectric" and not np.any(m.absorption_per_m)
-                and f"{name}.absorption" not in scene.fit_parameters]
+                if m.transmissive and missing(scene, compiled.specs, f"{name}.absorption")]
 
     def add(self, data: dict, target: str) -> None:
         data["materials"][target]["absorption"] = [0.0, 0.0, 0.0]

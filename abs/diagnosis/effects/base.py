@@ -6,6 +6,12 @@ scene file leaves it out, i.e. at its null value and not fitted), how to add its
 TOML data at its null value (:meth:`Effect.add`, so the extended scene renders exactly like the
 given one), which parameters it releases to :func:`abs.fit` (:meth:`Effect.parameters`), and how
 to say in physical terms what a fitted value means (:meth:`Effect.explain`).
+
+Effects find where they apply by asking the scene's parameters and materials, never by naming
+material types: a parameter's null value (:attr:`abs.params.Parameter.null`, see :func:`missing`)
+and a material's capabilities (:attr:`abs.scene.materials.Material.transmissive`). So a new
+material type with, say, an ``absorption`` field of null value 0 is a target of ``absorption``
+without a change here, and a new effect is one new file.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
-__all__ = ["Effect", "Candidate", "register", "effect", "effects"]
+__all__ = ["Effect", "Candidate", "register", "effect", "effects", "missing"]
 
 
 @dataclass(frozen=True)
@@ -90,6 +96,23 @@ class Effect(ABC):
 
     def candidates(self, scene, compiled) -> list[Candidate]:
         return [Candidate(self.name, t, self.parameters(t)) for t in self.targets(scene, compiled)]
+
+
+def missing(scene, specs, name: str) -> bool:
+    """Whether the scene leaves out the effect that parameter ``name`` models: the parameter
+    exists, has a null value, the scene file sets it there, and ``[fit]`` does not release it.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene as given.
+    specs : dict of str to Parameter
+        Its parameters (:func:`abs.params.parameter_specs`, or ``CompiledScene.specs``).
+    name : str
+        A parameter name (``glass.absorption``, ``sensor.vignetting``).
+    """
+    spec = specs.get(name)
+    return spec is not None and spec.at_null() and name not in scene.fit_parameters
 
 
 _REGISTRY: dict[str, Effect] = {}

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, register
+from abs.diagnosis.effects.base import Effect, missing, register
 
 _PARAMETER = "environment.inverse_distance"
 
@@ -14,8 +14,7 @@ class EnvironmentDistance(Effect):
     name = "env_distance"
 
     def targets(self, scene, compiled) -> list[str]:
-        missing = (scene.environment.inverse_distance == 0.0 and _PARAMETER not in scene.fit_parameters)
-        return ["environment"] if missing else []
+        return ["environment"] if missing(scene, compiled.specs, _PARAMETER) else []
 
     def add(self, data: dict, target: str) -> None:
         data["environment"]["inverse_distance"] = 0.0

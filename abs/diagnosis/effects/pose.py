@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, register
+from abs.diagnosis.effects.base import Effect, missing, register
 
 # Flat objects (a floor, a backdrop) slide within their own plane invisibly: only solid ones.
 # Glass objects are left out: the renderer's pose gradients miss silhouettes seen through glass
@@ -25,9 +25,9 @@ class Pose(Effect):
         extents = {s.id(): np.array(s.bbox().max, float).ravel() - np.array(s.bbox().min, float).ravel()
                    for s in compiled.mitsuba_scene.shapes()}
         return [o.name for o in scene.objects
-                if not np.any(o.pose) and f"{o.name}.pose" not in scene.fit_parameters
-                and scene.materials[o.material].type_name != "dielectric"
-                and np.min(extents.get(o.name, np.zeros(3))) > _MIN_EXTENT_M]
+                if missing(scene, compiled.specs, f"{o.name}.pose")
+                and not scene.materials[o.material].transmissive
+                and np.min(extents.get(compiled.shape_ids[o.name], np.zeros(3))) > _MIN_EXTENT_M]
 
     def add(self, data: dict, target: str) -> None:
         for table in data["objects"]:

@@ -6,9 +6,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
-
-from abs.diagnosis.effects.base import Effect
+from abs.diagnosis.effects.base import Effect, missing
 
 __all__ = ["SensorField"]
 
@@ -22,14 +20,8 @@ class SensorField(Effect):
     def parameter(self) -> str:
         return f"sensor.{self.field}"
 
-    def null(self, scene) -> np.ndarray:
-        size, _, _, _, null = type(scene.sensor).FIELDS[self.field]
-        return np.full(size, float(null))
-
     def targets(self, scene, compiled) -> list[str]:
-        value = np.asarray(getattr(scene.sensor, self.field), float)
-        missing = np.array_equal(value, self.null(scene)) and self.parameter not in scene.fit_parameters
-        return ["sensor"] if missing else []
+        return ["sensor"] if missing(scene, compiled.specs, self.parameter) else []
 
     def add(self, data: dict, target: str) -> None:
         size, _, _, _, null = self._spec()

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, register
+from abs.diagnosis.effects.base import Effect, missing, register
 
 
 @register
@@ -20,9 +20,9 @@ class Subsurface(Effect):
 
     def targets(self, scene, compiled) -> list[str]:
         used = {o.material for o in scene.objects}
-        return [name for name, m in scene.materials.items()
-                if name in used and m.type_name == "diffuse" and m.subsurface_m == 0.0
-                and f"{name}.subsurface" not in scene.fit_parameters]
+        # Materials on some object with a subsurface spread at its null value (0: a surface).
+        return [name for name in scene.materials
+                if name in used and missing(scene, compiled.specs, f"{name}.subsurface")]
 
     def add(self, data: dict, target: str) -> None:
         data["materials"][target]["subsurface"] = 0.0

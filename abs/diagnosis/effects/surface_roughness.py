@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, register
+from abs.diagnosis.effects.base import Effect, missing, register
 
 
 @register
@@ -16,9 +16,9 @@ class SurfaceRoughness(Effect):
     zero_null_derivative = True
 
     def targets(self, scene, compiled) -> list[str]:
+        # Glass whose roughness can be, and is, 0 (roughdielectric's cannot: it has no null).
         return [name for name, m in scene.materials.items()
-                if m.type_name == "dielectric" and m.roughness == 0.0
-                and f"{name}.roughness" not in scene.fit_parameters]
+                if m.transmissive and missing(scene, compiled.specs, f"{name}.roughness")]
 
     def add(self, data: dict, target: str) -> None:
         data["materials"][target]["roughness"] = 0.0

@@ -10,10 +10,11 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, ClassVar
+from typing import ClassVar
 
 import numpy as np
 
+from abs.params.setters import MaterialApplySetter, MitsubaKeySetter, Setter
 from abs.scene.fields import Fields
 
 __all__ = ["Material", "ParameterSpec", "register", "material_types", "material_class"]
@@ -51,6 +52,11 @@ class ParameterSpec:
         the glass). Forward mode leaves those edges' boundary terms out; the difference is the
         exact derivative of the image smoothed over +-step (a mollified derivative), boundaries
         at any depth included (see docs/renderer.md).
+    null : float or None
+        The value (every entry) at which the effect the field models is absent, so that the
+        material renders exactly as without it (an absorption or roughness of 0); ``None`` for a
+        field that is a quantity of the model (an IOR, a reflectance). Diagnosis effects find
+        where they are missing by it (:attr:`abs.params.Parameter.null`).
     """
 
     field: str
@@ -62,6 +68,7 @@ class ParameterSpec:
     moves_paths: bool = False
     separable_channels: bool = False
     difference_step: float | None = None
+    null: float | None = None
 
 
 class Material(ABC):
@@ -69,9 +76,19 @@ class Material(ABC):
 
     Subclasses are immutable descriptions parsed from the scene file; :meth:`to_mitsuba` turns
     them into a Mitsuba BSDF dictionary.
+
+    Attributes
+    ----------
+    type_name : str
+        The scene file's ``type``.
+    transmissive : bool
+        Light passes through the material (glass): code that must treat glass apart asks this
+        rather than naming types (the pose effect leaves glass objects out, absorption and
+        surface roughness apply to glass only).
     """
 
     type_name: ClassVar[str]
+    transmissive: ClassVar[bool] = False
 
     def __init__(self, name: str):
         self.name = name
@@ -105,6 +122,17 @@ class Material(ABC):
         """Current value of a differentiable field as given in the scene file."""
         return np.atleast_1d(np.asarray(self._toml[field], dtype=np.float64))
 
+    def setter(self, field: str) -> Setter:
+        """How the compiled scene writes the differentiable ``field``
+        (:attr:`abs.params.Parameter.setter`): into the Mitsuba parameter ``<name>.<mitsuba_key>``
+        as it is, or, for a field without a ``mitsuba_key``, through :meth:`apply`. A material
+        type that needs another binding overrides this.
+        """
+        key = self.parameters()[field].mitsuba_key
+        if key is None:
+            return MaterialApplySetter(self.name, field)
+        return MitsubaKeySetter(f"{self.name}.{key}")
+
     def apply(self, field: str, value, mitsuba_params) -> None:
         """Write a field whose ``mitsuba_key`` is ``None`` into the Mitsuba parameters.
 
@@ -134,5 +162,3 @@ def material_types() -> list[str]:
 def material_class(type_name: str) -> type[Material] | None:
     return _REGISTRY.get(type_name)
 
-
-ParameterSetter = Callable[[object, object], None]

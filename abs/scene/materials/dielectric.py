@@ -10,6 +10,7 @@ from abs.scene.materials.base import Material, ParameterSpec, register
 @register
 class Dielectric(Material):
     type_name = "dielectric"
+    transmissive = True
 
     @classmethod
     def from_fields(cls, name: str, fields: Fields) -> "Dielectric":
@@ -33,7 +34,9 @@ class Dielectric(Material):
             # before a checkerboard it had about 2x less variance than 0.01, 3x less than 0.003.
             "ior": ParameterSpec("ior", 3, "1", 1.0, 3.0, "ior", moves_paths=True,
                                  separable_channels=True, difference_step=0.02),
+            # Null values: clear glass, polished surfaces (the diagnosis adds either effect there).
             "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption",
-                                        separable_channels=True),
-            "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True),
+                                        separable_channels=True, null=0.0),
+            "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True,
+                                       null=0.0),
         }

@@ -55,7 +55,7 @@ class Diffuse(Material):
 
     def parameters(self) -> dict[str, ParameterSpec]:
         # Read by the path tracer (abs.render.integrator), not by the Mitsuba BSDF.
-        subsurface = ParameterSpec("subsurface", 1, "m", 0.0, SUBSURFACE_MAX_M, None)
+        subsurface = ParameterSpec("subsurface", 1, "m", 0.0, SUBSURFACE_MAX_M, None, null=0.0)
         if self.texture is not None:
             # The whole texture (H x W x 3 values) is the parameter; its size is known once loaded.
             return {"reflectance": ParameterSpec("reflectance", -1, "1", 0.0, 1.0, "reflectance.data"),

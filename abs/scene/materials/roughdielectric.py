@@ -10,6 +10,7 @@ from abs.scene.materials.base import Material, ParameterSpec, register
 @register
 class RoughDielectric(Material):
     type_name = "roughdielectric"
+    transmissive = True
 
     @classmethod
     def from_fields(cls, name: str, fields: Fields) -> "RoughDielectric":

@@ -1,0 +1,69 @@
+"""How a parameter's value is written into a compiled scene: one small class per kind of owner.
+
+A :class:`~abs.params.names.Parameter` carries one of these (its owner chooses which), and
+:meth:`abs.render.CompiledScene.set` calls it, so the compiled scene holds no list of owners.
+They are duck-typed against the compiled scene (its ``environment``, ``sensor``, ``params``,
+``scene``, :meth:`~abs.render.CompiledScene.write_mitsuba` and
+:meth:`~abs.render.CompiledScene.set_pose`), so this module imports nothing from the renderer and
+the parameter catalogue stays below it in the layers. Plain classes rather than closures: they
+compare, print and pickle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = ["Setter", "AttributeSetter", "PoseSetter", "MitsubaKeySetter", "MaterialApplySetter"]
+
+
+class Setter(Protocol):
+    """``setter(compiled, value)``: write ``value`` (a Dr.Jit ``Float``, possibly attached to
+    the AD graph) into ``compiled``, a :class:`~abs.render.CompiledScene`."""
+
+    def __call__(self, compiled, value) -> None: ...
+
+
+@dataclass(frozen=True)
+class AttributeSetter:
+    """An attribute of one of the compiled scene's members (``environment.scale``: the
+    :class:`~abs.render.environment.Environment`'s ``scale``; ``sensor.response``)."""
+
+    member: str
+    attribute: str
+
+    def __call__(self, compiled, value) -> None:
+        setattr(getattr(compiled, self.member), self.attribute, value)
+
+
+@dataclass(frozen=True)
+class PoseSetter:
+    """An object's pose: its mesh is moved rigidly (see ``docs/conventions.md``)."""
+
+    obj: str
+
+    def __call__(self, compiled, value) -> None:
+        compiled.set_pose(self.obj, value)
+
+
+@dataclass(frozen=True)
+class MitsubaKeySetter:
+    """A Mitsuba scene parameter that holds the value as it is (``glass.ior``,
+    ``cloth.reflectance.value``)."""
+
+    key: str
+
+    def __call__(self, compiled, value) -> None:
+        compiled.write_mitsuba(self.key, value)
+
+
+@dataclass(frozen=True)
+class MaterialApplySetter:
+    """A material field the material itself turns into Mitsuba values
+    (:meth:`abs.scene.materials.Material.apply`: a PCA table from its coefficients)."""
+
+    material: str
+    field: str
+
+    def __call__(self, compiled, value) -> None:
+        compiled.scene.materials[self.material].apply(self.field, value, compiled.params)
