@@ -2,7 +2,9 @@
 
 Optimisers work on an unconstrained vector ``z``; each scalar maps to its physical value by
 
-- ``lower + (upper - lower) * sigmoid(z)`` when both bounds are finite (``glass.ior`` in [1, 3]),
+- ``lower + (upper - lower) * sigmoid(k * z)`` when both bounds are finite (``glass.ior`` in
+  [1, 3]); ``k = 1``, unless the parameter's spec gives a ``typical_step``: then ``k`` makes a
+  unit step in ``z`` change the starting value by that step,
 - ``lower + s * softplus(z)`` when only the lower bound is (absorption >= 0, scale >= 0),
 - ``initial + s * z`` when unbounded (pose, environment rotation),
 
@@ -38,6 +40,8 @@ def _sigmoid(z):
 
 def typical_step(spec: Parameter, initial: np.ndarray) -> np.ndarray:
     """Typical size of a change of each scalar of ``spec`` (its units), for conditioning."""
+    if spec.typical_step is not None:
+        return np.full(len(initial), float(spec.typical_step))
     units = [u.strip() for u in spec.unit.split(",")]
     if len(units) == len(initial) and all(u in _STEP_BY_UNIT for u in units):
         return np.array([_STEP_BY_UNIT[u] for u in units])
@@ -60,6 +64,9 @@ class ParameterVector:
     step : ndarray
         Typical change of every scalar (physical units).
     units : tuple of str
+    gain : ndarray
+        ``k`` of the sigmoid of scalars bounded on both sides (1 where the spec gives no
+        ``typical_step``, so that existing fits keep their conditioning).
     """
 
     names: tuple[str, ...]
@@ -69,11 +76,12 @@ class ParameterVector:
     initial: np.ndarray
     step: np.ndarray
     units: tuple[str, ...]
+    gain: np.ndarray | None = None
 
     @classmethod
     def build(cls, specs: dict[str, Parameter], names, initial: dict[str, np.ndarray]) -> "ParameterVector":
         """Lay out ``names`` (in order) from their specs and current values."""
-        sizes, lower, upper, start, step, units = [], [], [], [], [], []
+        sizes, lower, upper, start, step, units, gain = [], [], [], [], [], [], []
         for name in names:
             spec = specs[name]
             value = np.asarray(initial[name], np.float64).ravel()
@@ -83,11 +91,16 @@ class ParameterVector:
             s = typical_step(spec, value)
             # A start on a bound has z = -inf: move it inside by a small fraction of a step.
             value = np.clip(value, lo + 1e-3 * s, hi - 1e-3 * s)
+            k = np.ones(len(value))
+            if spec.typical_step is not None and np.isfinite(spec.lower) and np.isfinite(spec.upper):
+                # d theta / dz at the start = span * k * u (1 - u) = step.
+                u = (value - lo) / (hi - lo)
+                k = s / ((hi - lo) * u * (1.0 - u))
             lower.append(lo); upper.append(hi); start.append(value); step.append(s)
-            units.append(spec.unit)
+            units.append(spec.unit); gain.append(k)
         cat = np.concatenate
         return cls(tuple(names), tuple(sizes), cat(lower), cat(upper), cat(start), cat(step),
-                   tuple(units))
+                   tuple(units), cat(gain))
 
     @property
     def size(self) -> int:
@@ -110,6 +123,10 @@ class ParameterVector:
                 for i in range(n)]
 
     # ----------------------------------------------------------- transforms
+    @property
+    def _gain(self) -> np.ndarray:
+        return np.ones_like(self.step) if self.gain is None else self.gain
+
     def _kinds(self):
         lo_f, hi_f = np.isfinite(self.lower), np.isfinite(self.upper)
         return lo_f & hi_f, lo_f & ~hi_f, ~lo_f & hi_f
@@ -122,7 +139,7 @@ class ParameterVector:
         theta = np.where(low, self.lower + self.step * _softplus(z), theta)
         theta = np.where(high, self.upper - self.step * _softplus(-z), theta)
         span = np.where(both, self.upper - self.lower, 1.0)
-        return np.where(both, self.lower + span * _sigmoid(z), theta)
+        return np.where(both, self.lower + span * _sigmoid(self._gain * z), theta)
 
     def derivative(self, z: np.ndarray) -> np.ndarray:
         """``d theta / d z`` per scalar (the transform is elementwise)."""
@@ -132,8 +149,8 @@ class ParameterVector:
         d = np.where(low, self.step * _sigmoid(z), d)
         d = np.where(high, self.step * _sigmoid(-z), d)
         span = np.where(both, self.upper - self.lower, 1.0)
-        s = _sigmoid(z)
-        return np.where(both, span * s * (1.0 - s), d)
+        s = _sigmoid(self._gain * z)
+        return np.where(both, span * self._gain * s * (1.0 - s), d)
 
     def to_unconstrained(self, theta: np.ndarray) -> np.ndarray:
         """Physical values (strictly inside the bounds) -> ``z``."""
@@ -145,4 +162,4 @@ class ParameterVector:
             z = np.where(high, -_softplus_inverse(np.maximum((self.upper - theta) / self.step, 1e-300)), z)
             span = np.where(both, self.upper - self.lower, 1.0)
             u = np.clip((theta - self.lower) / span, 1e-12, 1 - 1e-12)
-            return np.where(both, np.log(u) - np.log1p(-u), z)
+            return np.where(both, (np.log(u) - np.log1p(-u)) / self._gain, z)

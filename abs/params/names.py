@@ -55,6 +55,9 @@ class Parameter:
     difference_step : float or None
         Derivatives by common-random-number central differences of this step (parameter units)
         rather than forward mode (see :class:`abs.scene.materials.base.ParameterSpec`).
+    typical_step : float or None
+        The change over which images stay near linear in the parameter (its units), if the
+        owner knows it better than the default of the fit's conditioning.
     null : ndarray or None
         The value at which the parameter's effect is absent and the rendering is exactly the
         model without it (a roughness of 0, a pose of zeros, a linear response), ``size``
@@ -75,6 +78,7 @@ class Parameter:
     moves_paths: bool = False
     separable_channels: bool = False
     difference_step: float | None = None
+    typical_step: float | None = None
     null: np.ndarray | None = field(default=None, compare=False)
     setter: Setter | None = field(default=None, compare=False, repr=False)
 
@@ -126,7 +130,7 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             specs[f"{name}.{field_name}"] = Parameter(
                 f"{name}.{field_name}", spec.size, spec.unit, spec.lower, spec.upper, initial,
                 spec.moves_paths, spec.separable_channels and spec.size == 3,
-                spec.difference_step,
+                spec.difference_step, spec.typical_step,
                 null=_null(spec.null, spec.size), setter=material.setter(field_name))
     for obj in scene.objects:
         specs[f"{obj.name}.{POSE_FIELD}"] = Parameter(

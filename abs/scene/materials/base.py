@@ -52,6 +52,12 @@ class ParameterSpec:
         the glass). Forward mode leaves those edges' boundary terms out; the difference is the
         exact derivative of the image smoothed over +-step (a mollified derivative), boundaries
         at any depth included (see docs/renderer.md).
+    typical_step : float or None
+        The size of change over which the image stays close to linear in the field (its unit):
+        a fit's first steps are about this large. ``None``: from the value and bounds
+        (:func:`abs.fitting.parameters.typical_step`). An IOR needs it: the image of a
+        checkerboard through a glass sphere is linear in the IOR over about 0.01 only, while the
+        default (the distance from the bound, 0.5) let the first steps jump to IOR 2.
     null : float or None
         The value (every entry) at which the effect the field models is absent, so that the
         material renders exactly as without it (an absorption or roughness of 0); ``None`` for a
@@ -68,6 +74,7 @@ class ParameterSpec:
     moves_paths: bool = False
     separable_channels: bool = False
     difference_step: float | None = None
+    typical_step: float | None = None
     null: float | None = None
 
 
