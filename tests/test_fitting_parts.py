@@ -9,12 +9,12 @@ import pytest
 
 from abs.errors import InputError
 from abs.fitting.laplace import laplace, with_monte_carlo_error
-from abs.fitting.observations import downsample, downsample_camera, estimate_image_noise
 from abs.fitting.optimizers import (OptimizerState, adam, cross_curvature, gauss_newton_refinement,
                                    levenberg_marquardt)
-from abs.fitting.parameters import ParameterVector
 from abs.fitting.settings import parse_schedule, schedule_value
 from abs.io.fit_files import load_checkpoint, save_checkpoint
+from abs.model import ParameterVector, estimate_image_noise
+from abs.model.downsampling import downsample, downsample_camera
 from abs.params.names import Parameter
 
 
@@ -223,9 +223,7 @@ def test_a_downsampled_camera_renders_the_box_average_of_the_fine_image(small_sc
 
 @pytest.mark.slow
 def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_scene_dir, tmp_path):
-    from abs.fitting.fit import prepare
-    from abs.fitting.observations import observe
-    from abs.fitting.problem import FitProblem
+    from abs.model import build_model
     from abs.simulate import simulate_capture
 
     from abs import load_scene
@@ -234,9 +232,9 @@ def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_sc
     capture = simulate_capture(scene, tmp_path / "capture", n_cameras=2, width=24,
                                height=18, spp=32, n_holdout=0, seed=5)
     names = ["environment.scale", "glass.absorption"]
-    _, compiled, capture, _ = prepare(scene, capture, names)
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    problem = FitProblem(compiled, vector, [observe(v) for v in capture.train_views], clamp=0.9)
+    model = build_model(scene, capture, names)
+    vector = model.vector
+    problem = model.problem("train", clamp=0.9)
     theta = vector.initial * np.array([1.2, 0.7, 1.3, 0.9])  # away from the truth: r is not noise
     r, J = problem.residuals(theta, 4, seed=3, jacobian=True, jacobian_seed=8)
     half, g = problem.gradient(theta, 4, seed=3, jacobian_seed=8)

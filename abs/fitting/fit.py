@@ -11,23 +11,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from abs.errors import InputError
 from abs.fitting.checks import run_checks
 from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
-from abs.fitting.observations import Observation, estimate_image_noise, observe
 from abs.fitting.optimizers import (OptimizerState, adam, averaged_refinement_points,
                                     gauss_newton_refinement, levenberg_marquardt)
-from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem, RenderCounter
 from abs.fitting.settings import LM_MAX_SCALARS, FitSettings, schedule_value
 from abs.metrics import ssim
+from abs.model import FitProblem, ParameterVector, build_model, estimate_image_noise, render_views
 
-__all__ = ["fit", "FitResult", "ViewRenderings", "prepare", "render_views"]
+__all__ = ["fit", "FitResult", "ViewRenderings"]
 
 
 @dataclass(frozen=True)
@@ -91,39 +87,6 @@ class FitResult:
         }
 
 
-def prepare(scene, capture, parameters=None):
-    """Load (if given paths) and compile a scene and capture; check the parameter names.
-
-    Returns ``(scene, compiled, capture, names)``.
-    """
-    from abs.io.capture import load_capture
-    from abs.render import compile_scene
-    from abs.scene.load import load_scene
-
-    scene = load_scene(scene) if isinstance(scene, (str, Path)) else scene
-    capture = load_capture(capture) if isinstance(capture, (str, Path)) else capture
-    names = tuple(parameters) if parameters else scene.fit_parameters
-    if not names:
-        raise InputError(scene.source, "fit.parameters", "no parameters to fit (give them, or list "
-                                                         "them in the scene's [fit] parameters)")
-    compiled = compile_scene(scene)
-    for name in names:
-        if name not in compiled.specs:
-            raise InputError(None, "parameters", f"unknown parameter {name!r}; known: "
-                                                 f"{', '.join(sorted(compiled.specs))}")
-    if not capture.train_views:
-        raise InputError(capture.folder / "cameras.json", "views",
-                         "every view is a holdout view; nothing to fit")
-    return scene, compiled, capture, names
-
-
-def render_views(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
-                 seed: int) -> dict[str, np.ndarray]:
-    """Renderings of ``observations`` at ``theta`` by name, view ``i`` seeded ``seed + 7 i``: a fit's
-    before/after images (and the diagnosis's holdout renders) are made this one way."""
-    return {o.name: problem.render(o, theta, spp, seed + 7 * i) for i, o in enumerate(observations)}
-
-
 def _metrics(observations, renders) -> dict[str, float]:
     out = {}
     for split, holdout in (("train", False), ("holdout", True)):
@@ -168,27 +131,15 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
-    scene, compiled, capture, names = prepare(scene, capture, parameters)
+    model = build_model(scene, capture, parameters, initial)
+    scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
+                                               model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
-    for name, value in (initial or {}).items():
-        if name not in names:
-            raise InputError(None, "initial", f"{name!r} is not among the fitted parameters {names}")
-        try:
-            compiled.set(name, np.asarray(value, np.float64))
-        except ValueError as exc:
-            raise InputError(None, f"initial.{name}", str(exc)) from None
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
     method = settings.resolved_method(vector.size)
     if resume is not None and (resume.method != method or resume.z.size != vector.size):
         raise ValueError(f"checkpoint is a {resume.method} fit of {resume.z.size} scalars; this "
                          f"fit is {method} with {vector.size}")
-    counter = RenderCounter()
-
-    def problem_at(factor: int, views) -> FitProblem:
-        return FitProblem(compiled, vector, [observe(v, factor) for v in views], settings.clamp,
-                          counter=counter)
-
-    full = problem_at(1, capture.views)
+    full = model.problem("all", 1, settings.clamp)
     eval_spp = settings.eval_spp or scene.render.spp
     before = render_views(full, full.observations, vector.initial, eval_spp, settings.seed + 1)
 
@@ -199,12 +150,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
             prior_mean[s], prior_sd[s] = priors[name].mean, priors[name].sd
     has_prior = np.isfinite(prior_sd)
 
-    problems: dict[int, FitProblem] = {}
-
     def train_problem(factor: int) -> FitProblem:
-        if factor not in problems:
-            problems[factor] = problem_at(factor, capture.train_views)
-        return problems[factor]
+        return model.problem("train", factor, settings.clamp)
 
     # Pixel noise (photograph + Monte-Carlo) weighs the pixels against the priors.
     first = train_problem(settings.downsample)

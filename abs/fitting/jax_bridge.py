@@ -2,7 +2,7 @@
 
 The residual function ``z -> r(z)`` is a :func:`jax.pure_callback` (the renderer runs outside
 JAX) with a :func:`jax.custom_jvp` whose tangent map is ``t -> J(z) @ t``, ``J`` being the
-Jacobian that Dr.Jit's forward mode computed (:meth:`abs.fitting.problem.FitProblem.residuals`).
+Jacobian that Dr.Jit's forward mode computed (:meth:`abs.model.problem.FitProblem.residuals`).
 Because the tangent map is an explicit matrix product, JAX can linearise, transpose and batch it,
 which is all that optimistix's Gauss-Newton and Levenberg-Marquardt solvers ask of a function.
 Residuals and Jacobian at a point are computed once and cached, so the primal and tangent
