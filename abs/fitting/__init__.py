@@ -2,7 +2,7 @@
 their Laplace uncertainty, and the per-channel RMSE scans of the seed papers (``abs.scan``)."""
 
 from abs.fitting.fit import FitResult, fit
-from abs.fitting.optimizers import OptimizerState
+from abs.fitting.optimisers import OptimizerState
 from abs.fitting.scan import ScanResult, scan
 from abs.fitting.settings import FitSettings
 
