@@ -9,12 +9,13 @@ import pytest
 
 from abs.errors import InputError
 from abs.fitting.laplace import laplace, with_monte_carlo_error
-from abs.fitting.observations import downsample, downsample_camera, estimate_image_noise
-from abs.fitting.optimizers import (OptimizerState, adam, cross_curvature, gauss_newton_refinement,
-                                   levenberg_marquardt)
-from abs.fitting.parameters import ParameterVector
+from abs.fitting.optimisers import OptimizerState
+from abs.fitting.optimisers.adam import adam
+from abs.fitting.optimisers.lm import cross_curvature, gauss_newton_refinement, levenberg_marquardt
 from abs.fitting.settings import parse_schedule, schedule_value
 from abs.io.fit_files import load_checkpoint, save_checkpoint
+from abs.model import ParameterVector, estimate_image_noise
+from abs.model.downsampling import downsample, downsample_camera
 from abs.params.names import Parameter
 
 
@@ -83,7 +84,7 @@ def test_refinement_takes_full_steps_despite_very_noisy_jacobians():
     assert np.allclose(state.z, exact, atol=0.03)
     # One Gauss-Newton step from J1^T J1 would stop about halfway (curvature inflated by the
     # noise): the cross curvature's first step removes most of the offset.
-    first = np.asarray(state.moments["refinement"][0])
+    first = np.asarray(state.solver.refinement.points[0])
     assert np.all(np.abs(first - exact) < 0.1 * 0.3), first - exact
 
 
@@ -103,13 +104,13 @@ def test_refinement_travels_far_when_the_solution_is_many_typical_steps_away():
     start = exact + np.array([6.0, -4.0, 5.0])
     state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, start), steps=6)
     assert np.allclose(state.z, exact, atol=0.05), state.z - exact
-    clipped = state.moments["refinement_clipped"]
+    clipped = state.solver.refinement.clipped
     assert clipped[0] and not clipped[-1]
-    points = np.asarray([start] + state.moments["refinement"])
+    points = np.asarray([start, *state.solver.refinement.points])
     assert np.abs(np.diff(points, axis=0)).max() >= 2.0  # the radius grew
     # A fixed radius of one typical step would still be 2 away after 4 steps.
     fixed = gauss_newton_refinement(noisy, OptimizerState("lm", 0, start), steps=4, max_step=1.0)
-    assert np.abs(np.asarray(fixed.moments["refinement"][0]) - start).max() == pytest.approx(1.0)
+    assert np.abs(np.asarray(fixed.solver.refinement.points[0]) - start).max() == pytest.approx(1.0)
 
 
 def test_cross_curvature_is_unbiased_where_the_self_product_is_not():
@@ -223,9 +224,7 @@ def test_a_downsampled_camera_renders_the_box_average_of_the_fine_image(small_sc
 
 @pytest.mark.slow
 def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_scene_dir, tmp_path):
-    from abs.fitting.fit import prepare
-    from abs.fitting.observations import observe
-    from abs.fitting.problem import FitProblem
+    from abs.model import build_model
     from abs.simulate import simulate_capture
 
     from abs import load_scene
@@ -234,9 +233,9 @@ def test_reverse_mode_gradient_equals_the_forward_mode_jacobian_product(small_sc
     capture = simulate_capture(scene, tmp_path / "capture", n_cameras=2, width=24,
                                height=18, spp=32, n_holdout=0, seed=5)
     names = ["environment.scale", "glass.absorption"]
-    _, compiled, capture, _ = prepare(scene, capture, names)
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    problem = FitProblem(compiled, vector, [observe(v) for v in capture.train_views], clamp=0.9)
+    model = build_model(scene, capture, names)
+    vector = model.vector
+    problem = model.problem("train", clamp=0.9)
     theta = vector.initial * np.array([1.2, 0.7, 1.3, 0.9])  # away from the truth: r is not noise
     r, J = problem.residuals(theta, 4, seed=3, jacobian=True, jacobian_seed=8)
     half, g = problem.gradient(theta, 4, seed=3, jacobian_seed=8)
@@ -253,3 +252,38 @@ def test_monte_carlo_error_of_averaged_points_adds_to_the_laplace_covariance():
     expected = np.sqrt(approx.stderr ** 2 + 0.2 ** 2 / 400)
     assert np.allclose(combined.stderr, expected, rtol=0.1)
     assert with_monte_carlo_error(approx, points[:1]) is approx
+
+
+def test_optimisers_are_registered_by_file_name_and_checked_by_the_settings():
+    from abs.fitting.optimisers import get, names
+    from abs.fitting.optimisers.adam import Adam
+    from abs.fitting.optimisers.lm import LevenbergMarquardt
+    from abs.fitting.settings import FitSettings
+
+    assert names() == ("adam", "lm")
+    assert isinstance(get("lm"), LevenbergMarquardt) and isinstance(get("adam"), Adam)
+    with pytest.raises(ValueError, match="unknown optimiser"):
+        get("newton")
+    with pytest.raises(ValueError, match="method must be auto, adam or lm"):
+        FitSettings(method="newton")
+
+
+def test_optimiser_states_are_typed_and_read_checkpoints_in_the_dictionary_format():
+    """Checkpoints written when the optimiser state was a dictionary named ``moments`` resume."""
+    from abs.fitting.optimisers.adam import AdamState
+    from abs.fitting.optimisers.lm import LMState
+
+    old = {"method": "lm", "iteration": 7, "z": [0.5, -1.0], "history": [],
+           "moments": {"lm_converged": True, "refinement": [[0.4, -1.1], [0.45, -1.05]],
+                       "refinement_clipped": [True, False], "refinement_radius": 2.0,
+                       "refinement_step": [0.05, 0.05]}}
+    state = OptimizerState.from_dict(old)
+    assert isinstance(state.solver, LMState) and state.solver.converged
+    assert state.solver.refinement.clipped == (True, False) and state.solver.refinement.radius == 2.0
+    assert json.loads(json.dumps(state.to_dict())) == old
+    fresh = OptimizerState.from_dict({"method": "lm", "iteration": 3, "z": [0.0], "moments": {}})
+    assert fresh.solver is None and fresh.to_dict()["moments"] == {}
+    adam_old = {"method": "adam", "iteration": 2, "z": [1.0], "history": [],
+                "moments": {"m": [0.1], "v": [0.01], "tail_sum": [0.0], "tail_count": 0}}
+    state = OptimizerState.from_dict(adam_old)
+    assert isinstance(state.solver, AdamState) and state.to_dict() == adam_old

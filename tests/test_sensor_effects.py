@@ -12,7 +12,7 @@ import pytest
 
 from abs.camera.pinhole import intrinsics_from_fov, look_at
 from abs.errors import SceneError
-from abs.fitting.observations import downsample_camera
+from abs.model.downsampling import downsample_camera
 from abs.render import Camera, PathTracer, compile_scene
 from abs.render.sensor import radial_moments
 from abs.scene import load_scene, write_scene

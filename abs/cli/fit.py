@@ -7,6 +7,16 @@ from dataclasses import asdict
 from pathlib import Path
 
 
+def _optimisers() -> tuple[str, ...]:
+    """The registered optimisers' names: their files in abs/fitting/optimisers/ (see its
+    ``names``), listed without importing abs.fitting, which would start the renderer for --help."""
+    from importlib.resources import files
+
+    folder = files("abs").joinpath("fitting", "optimisers")
+    return tuple(sorted(f.name[:-3] for f in folder.iterdir()
+                        if f.name.endswith(".py") and not f.name.startswith("_")))
+
+
 def add_parser(sub) -> None:
     p = sub.add_parser("fit", help="fit scene parameters to a capture's photographs")
     p.add_argument("scene", type=Path, help="scene file (TOML)")
@@ -16,7 +26,7 @@ def add_parser(sub) -> None:
     p.add_argument("--init", action="append", default=[], metavar="NAME=V[,V...]",
                    help="start a parameter here instead of at the scene's value (repeatable), "
                         "e.g. --init glass.absorption=2,2,2")
-    p.add_argument("--method", choices=("auto", "lm", "adam"), default="auto",
+    p.add_argument("--method", choices=("auto", *_optimisers()), default="auto",
                    help="Levenberg-Marquardt (few scalars) or Adam (many); auto picks")
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of fitting renders")
     p.add_argument("--downsample", type=int, default=1, help="compare images reduced by this factor")

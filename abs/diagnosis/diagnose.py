@@ -209,12 +209,13 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         and reused, score tests (one Jacobian each) are recomputed. Renders are seeded, so a
         resumed diagnosis reaches the same verdict.
     """
-    from abs.fitting.fit import prepare
+    from abs.model import build_model
     from abs.render import Camera
 
     t0 = time.perf_counter()
     step = on_step or (lambda message: None)
-    scene, compiled, capture, names = prepare(scene, capture)
+    model = build_model(scene, capture)
+    scene, compiled, capture, names = model.scene, model.compiled, model.capture, model.names
     if not capture.holdout_views:
         raise InputError(capture.folder / "cameras.json", "views",
                          "diagnose needs at least one holdout view: effects are accepted only if "

@@ -17,10 +17,7 @@ import numpy as np
 import tomli_w
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.fitting.fit import prepare
-from abs.fitting.observations import observe
-from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem
+from abs.model import build_model
 from abs.scene.load import load_scene
 from abs.scene.scene import Scene
 from abs.scene.write import scene_table, write_scene
@@ -70,15 +67,15 @@ def render_problem(scene: Scene, capture, names: Sequence[str], holdout: bool, f
                    clamp: float | None, values: Mapping[str, object] | None = None):
     """``(compiled, vector, theta, problem)``: ``scene`` compiled with ``names`` as its parameters,
     their values ``theta`` (``values``, or exactly the scene's own: null values stay unclipped) and
-    a :class:`~abs.fitting.problem.FitProblem` over the training (or holdout) views downsampled by
+    a :class:`~abs.model.problem.FitProblem` over the training (or holdout) views downsampled by
     ``factor``, with the fits' ``clamp``."""
-    _, compiled, capture, names = prepare(scene, capture, tuple(names))
+    model = build_model(scene, capture, tuple(names),
+                        None if values is None else {n: values[n] for n in names})
+    compiled, names = model.compiled, model.names
     current = {n: np.asarray(values[n] if values is not None else compiled.get(n), float).ravel()
                for n in names}
-    vector = ParameterVector.build(compiled.specs, names, current)
-    views = capture.holdout_views if holdout else capture.train_views
-    problem = FitProblem(compiled, vector, [observe(v, factor) for v in views], clamp)
-    return compiled, vector, np.concatenate([current[n] for n in names]), problem
+    problem = model.problem("holdout" if holdout else "train", factor, clamp)
+    return compiled, model.vector, np.concatenate([current[n] for n in names]), problem
 
 
 def fit_identity(scene: Scene, capture, names: Sequence[str], initial: Mapping[str, object],

@@ -34,8 +34,8 @@ import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
 from abs.diagnosis.model import fit_identity, render_problem
-from abs.fitting.parameters import ParameterVector
 from abs.fitting.settings import FitSettings
+from abs.model import ParameterVector
 
 __all__ = ["CandidateScore", "score_candidates"]
 

@@ -30,8 +30,8 @@ from abs.diagnosis.effects import Candidate, effect
 from abs.diagnosis.model import extend_scene, fit_identity, render_problem
 from abs.errors import InputError
 from abs.fitting import FitResult, FitSettings, OptimizerState, fit
-from abs.fitting.fit import render_views
 from abs.io.fit_files import load_checkpoint, save_checkpoint
+from abs.model import render_views
 
 __all__ = ["ModelFit", "Comparison", "fit_model", "compare", "HOLDOUT_Z"]
 

@@ -1,8 +1,10 @@
 """``abs.fit``: fit named scene parameters to a capture, with uncertainty.
 
 One call does the whole job: render every view with the initial parameters, optimise on the
-training views (Levenberg-Marquardt or Adam, see ``optimizers.py``), render every view again,
-and estimate standard errors and correlations by the Laplace approximation. Holdout views are
+training views, render every view again, and estimate standard errors and correlations by the
+Laplace approximation. The optimisation is an objective (``objective.py``: the weighted
+residuals of the forward model, ``abs.model``) handed to an optimiser looked up by name
+(``optimisers/``: Levenberg-Marquardt or Adam). Holdout views are
 never fitted; they are rendered and reported before and after. Storage (fit.json, checkpoints,
 report) and progress display are the caller's: pass ``on_iteration`` to observe the run.
 """
@@ -11,23 +13,19 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from abs.errors import InputError
 from abs.fitting.checks import run_checks
 from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
-from abs.fitting.observations import Observation, estimate_image_noise, observe
-from abs.fitting.optimizers import (OptimizerState, adam, averaged_refinement_points,
-                                    gauss_newton_refinement, levenberg_marquardt)
-from abs.fitting.parameters import ParameterVector
-from abs.fitting.problem import FitProblem, RenderCounter
-from abs.fitting.settings import LM_MAX_SCALARS, FitSettings, schedule_value
+from abs.fitting.objective import Objective
+from abs.fitting.optimisers import OptimizerState, get
+from abs.fitting.settings import FitSettings
 from abs.metrics import ssim
+from abs.model import ParameterVector, build_model, estimate_image_noise, render_views
 
-__all__ = ["fit", "FitResult", "ViewRenderings", "prepare", "render_views"]
+__all__ = ["fit", "FitResult", "ViewRenderings"]
 
 
 @dataclass(frozen=True)
@@ -91,39 +89,6 @@ class FitResult:
         }
 
 
-def prepare(scene, capture, parameters=None):
-    """Load (if given paths) and compile a scene and capture; check the parameter names.
-
-    Returns ``(scene, compiled, capture, names)``.
-    """
-    from abs.io.capture import load_capture
-    from abs.render import compile_scene
-    from abs.scene.load import load_scene
-
-    scene = load_scene(scene) if isinstance(scene, (str, Path)) else scene
-    capture = load_capture(capture) if isinstance(capture, (str, Path)) else capture
-    names = tuple(parameters) if parameters else scene.fit_parameters
-    if not names:
-        raise InputError(scene.source, "fit.parameters", "no parameters to fit (give them, or list "
-                                                         "them in the scene's [fit] parameters)")
-    compiled = compile_scene(scene)
-    for name in names:
-        if name not in compiled.specs:
-            raise InputError(None, "parameters", f"unknown parameter {name!r}; known: "
-                                                 f"{', '.join(sorted(compiled.specs))}")
-    if not capture.train_views:
-        raise InputError(capture.folder / "cameras.json", "views",
-                         "every view is a holdout view; nothing to fit")
-    return scene, compiled, capture, names
-
-
-def render_views(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
-                 seed: int) -> dict[str, np.ndarray]:
-    """Renderings of ``observations`` at ``theta`` by name, view ``i`` seeded ``seed + 7 i``: a fit's
-    before/after images (and the diagnosis's holdout renders) are made this one way."""
-    return {o.name: problem.render(o, theta, spp, seed + 7 * i) for i, o in enumerate(observations)}
-
-
 def _metrics(observations, renders) -> dict[str, float]:
     out = {}
     for split, holdout in (("train", False), ("holdout", True)):
@@ -168,51 +133,28 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
-    scene, compiled, capture, names = prepare(scene, capture, parameters)
+    model = build_model(scene, capture, parameters, initial)
+    scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
+                                               model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
-    for name, value in (initial or {}).items():
-        if name not in names:
-            raise InputError(None, "initial", f"{name!r} is not among the fitted parameters {names}")
-        try:
-            compiled.set(name, np.asarray(value, np.float64))
-        except ValueError as exc:
-            raise InputError(None, f"initial.{name}", str(exc)) from None
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
     method = settings.resolved_method(vector.size)
+    optimiser = get(method)
     if resume is not None and (resume.method != method or resume.z.size != vector.size):
         raise ValueError(f"checkpoint is a {resume.method} fit of {resume.z.size} scalars; this "
                          f"fit is {method} with {vector.size}")
-    counter = RenderCounter()
-
-    def problem_at(factor: int, views) -> FitProblem:
-        return FitProblem(compiled, vector, [observe(v, factor) for v in views], settings.clamp,
-                          counter=counter)
-
-    full = problem_at(1, capture.views)
+    full = model.problem("all", 1, settings.clamp)
     eval_spp = settings.eval_spp or scene.render.spp
     before = render_views(full, full.observations, vector.initial, eval_spp, settings.seed + 1)
 
-    prior_mean = np.full(vector.size, np.nan)
-    prior_sd = np.full(vector.size, np.inf)
-    for name, s in vector.slices().items():
-        if name in priors:
-            prior_mean[s], prior_sd[s] = priors[name].mean, priors[name].sd
-    has_prior = np.isfinite(prior_sd)
-
-    problems: dict[int, FitProblem] = {}
-
-    def train_problem(factor: int) -> FitProblem:
-        if factor not in problems:
-            problems[factor] = problem_at(factor, capture.train_views)
-        return problems[factor]
-
     # Pixel noise (photograph + Monte-Carlo) weighs the pixels against the priors.
-    first = train_problem(settings.downsample)
+    first = model.problem("train", settings.downsample, settings.clamp)
     sigma = float(np.hypot(
         estimate_image_noise(first.observations[0].photograph),
         estimate_image_noise(first.render(first.observations[0], vector.initial, settings.spp,
                                           settings.seed + 3))))
     sigma = max(sigma, 1e-4)
+    objective = Objective.build(model, settings, sigma, priors)
+    has_prior, prior_sd = objective.has_prior, objective.prior_sd
 
     state = resume or OptimizerState(method, 0, vector.to_unconstrained(vector.initial))
     previous_wall = float(state.history[-1].get("wall_s", 0.0)) if state.history else 0.0
@@ -222,70 +164,18 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         if on_iteration is not None:
             on_iteration(s)
 
-    if method == "lm":
-        problem = train_problem(settings.downsample)
-
-        def weighted_jacobian(J, dtheta):  # d(r / sigma)/dz, with the priors' rows below
-            J = J * dtheta / sigma
-            return np.concatenate([J, np.diag(dtheta / prior_sd)[has_prior]]) if has_prior.any() else J
-
-        def evaluate(z, iteration, seeds=(settings.seed, None)):
-            theta, dtheta = vector.to_physical(z), vector.derivative(z)
-            r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
-            loss = float(np.sqrt(np.mean(r ** 2)))
-            r = r / sigma
-            if has_prior.any():
-                r = np.concatenate([r, ((theta - prior_mean) / prior_sd)[has_prior]])
-            return r, weighted_jacobian(J, dtheta), loss
-
-        def second_jacobian(z, seed):
-            theta = vector.to_physical(z)
-            return weighted_jacobian(problem.jacobian(theta, settings.spp, seed), vector.derivative(z))
-
-        n_res = problem.n_residuals + int(has_prior.sum())
-        # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
-        if not state.moments.get("lm_converged") and not state.moments.get("refinement"):
-            state = levenberg_marquardt(evaluate, state, n_res, settings.max_iterations,
-                                        settings.rtol, settings.atol, iteration_done)
-
-        def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
-            base = settings.seed + 10_000 * iteration
-            r, J1, loss = evaluate(z, iteration, seeds=(base + 1, base + 2))
-            return r, (J1, second_jacobian(z, base + 3)), loss
-
-        state = gauss_newton_refinement(fresh, state, settings.refinement_steps,
-                                        on_iteration=iteration_done)
-    else:
-        def gradient(z, iteration):
-            theta, dtheta = vector.to_physical(z), vector.derivative(z)
-            problem = train_problem(schedule_value(settings.downsample_schedule, iteration,
-                                                   settings.downsample))
-            spp = schedule_value(settings.spp_schedule, iteration, settings.spp)
-            seed = settings.seed + 1000 * (iteration + 1)  # fresh noise: unbiased steps
-            if vector.size <= LM_MAX_SCALARS:
-                r, J = problem.residuals(theta, spp, seed, jacobian=True, jacobian_seed=seed + 1)
-                g = J.T @ r
-            else:
-                half, g = problem.gradient(theta, spp, seed, jacobian_seed=seed + 1)
-                r = np.array([np.sqrt(2 * half)])
-            g = g / sigma ** 2 + np.where(has_prior, (theta - np.nan_to_num(prior_mean)) / prior_sd ** 2, 0.0)
-            rms = float(np.sqrt(np.mean(r ** 2))) if r.size > 1 else float(r[0] / np.sqrt(problem.n_residuals))
-            return rms, g * dtheta
-
-        state = adam(gradient, state, settings.max_iterations, settings.learning_rate,
-                     on_iteration=iteration_done)
+    state = optimiser.run(objective, state, settings, iteration_done)
 
     theta = vector.to_physical(state.z)
     after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
-    problem = train_problem(settings.downsample)
+    problem = objective.problem()
     r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True,
                              jacobian_seed=settings.seed + 98)
     uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None,
                           jacobian2=problem.jacobian(theta, settings.spp, settings.seed + 97))
-    if state.moments.get("refinement"):
-        points = averaged_refinement_points(state.moments["refinement"],
-                                            state.moments.get("refinement_clipped"))
+    points = optimiser.averaged_points(state)
+    if points is not None:
         uncertainty = with_monte_carlo_error(uncertainty, np.array([vector.to_physical(p) for p in points]))
 
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)

@@ -2,22 +2,27 @@
 
 The residual function ``z -> r(z)`` is a :func:`jax.pure_callback` (the renderer runs outside
 JAX) with a :func:`jax.custom_jvp` whose tangent map is ``t -> J(z) @ t``, ``J`` being the
-Jacobian that Dr.Jit's forward mode computed (:meth:`abs.fitting.problem.FitProblem.residuals`).
+Jacobian that Dr.Jit's forward mode computed (:meth:`abs.model.problem.FitProblem.residuals`).
 Because the tangent map is an explicit matrix product, JAX can linearise, transpose and batch it,
 which is all that optimistix's Gauss-Newton and Levenberg-Marquardt solvers ask of a function.
 Residuals and Jacobian at a point are computed once and cached, so the primal and tangent
 evaluations of one linearisation cost one set of renders.
+
+:class:`on_calling_thread` runs a solve so that these callbacks still execute on the thread that
+recorded Dr.Jit's AD state.
 """
 
 from __future__ import annotations
 
+import queue
+import threading
 from typing import Callable
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["residual_function"]
+__all__ = ["residual_function", "on_calling_thread"]
 
 # Normal equations of 10^4-10^6 residuals lose too much in float32.
 jax.config.update("jax_enable_x64", True)
@@ -55,3 +60,58 @@ def residual_function(evaluate: Callable[[np.ndarray], tuple[np.ndarray, np.ndar
         return r, J @ t
 
     return residuals
+
+
+class on_calling_thread:
+    """Run a JAX host callback on the thread that started the solve.
+
+    XLA may run host callbacks on its own threads, but Dr.Jit's AD state is per thread (a
+    forward pass started on another thread refuses the graph recorded here). So the solver runs on
+    a helper thread and every callback is posted back to the calling thread, which serves them
+    until the solver returns.
+    """
+
+    _requests: queue.Queue | None = None
+
+    def __init__(self, function):
+        self.function = function
+
+    def __call__(self, *args):
+        requests = type(self)._requests
+        if requests is None:  # no solve in progress: a direct call
+            return self.function(*args)
+        reply: queue.Queue = queue.Queue(maxsize=1)
+        requests.put((self.function, args, reply))
+        ok, value = reply.get()
+        if not ok:
+            raise value
+        return value
+
+    @classmethod
+    def run(cls, solve):
+        cls._requests = requests = queue.Queue()
+        outcome: dict = {}
+
+        def worker():
+            try:
+                outcome["value"] = solve()
+            except BaseException as exc:  # noqa: BLE001 (re-raised on the calling thread)
+                outcome["error"] = exc
+            requests.put(None)
+
+        threading.Thread(target=worker, daemon=True, name="abs-optimistix").start()
+        try:
+            while (item := requests.get()) is not None:
+                function, args, reply = item
+                try:
+                    reply.put((True, function(*args)))
+                except BaseException as exc:  # noqa: BLE001 (handed to the solver thread)
+                    outcome.setdefault("callback_error", exc)
+                    reply.put((False, exc))
+        finally:
+            cls._requests = None
+        if "callback_error" in outcome:
+            raise outcome["callback_error"]
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["value"]

@@ -14,10 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from abs.fitting.fit import prepare
-from abs.fitting.observations import observe
-from abs.fitting.parameters import ParameterVector, typical_step
-from abs.fitting.problem import FitProblem, RenderCounter
+from abs.model import build_model, typical_step
 
 __all__ = ["scan", "ScanResult", "default_grid"]
 
@@ -90,13 +87,11 @@ def scan(scene, capture, parameter: str, grid: np.ndarray | None = None, points:
         Called after each rendered grid point (progress).
     """
     t0 = time.perf_counter()
-    scene, compiled, capture, _ = prepare(scene, capture, [parameter])
-    initial = compiled.get(parameter)
-    vector = ParameterVector.build(compiled.specs, [parameter], {parameter: initial})
-    spec = compiled.specs[parameter]
-    counter = RenderCounter()
-    problem = FitProblem(compiled, vector, [observe(v, downsample) for v in capture.train_views],
-                         counter=counter)
+    model = build_model(scene, capture, [parameter])
+    initial = model.compiled.get(parameter)
+    spec = model.compiled.specs[parameter]
+    counter = model.counter
+    problem = model.problem("train", downsample)
     # Residuals are stacked pixel by pixel with channels innermost: channel c is r[c::3].
     grids, curves, minima = [], [], []
     for c in range(len(initial)):

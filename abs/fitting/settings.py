@@ -38,8 +38,9 @@ class FitSettings:
 
     Attributes
     ----------
-    method : {"auto", "lm", "adam"}
-        ``auto``: Levenberg-Marquardt up to ``LM_MAX_SCALARS`` fitted scalars, else Adam.
+    method : str
+        A registered optimiser (``abs/fitting/optimisers/``: ``lm``, ``adam``), or ``auto``:
+        Levenberg-Marquardt up to ``LM_MAX_SCALARS`` fitted scalars, else Adam.
     spp : int
         Samples per pixel of the fitting renders (Adam: unless ``spp_schedule`` says otherwise).
     downsample : int
@@ -78,8 +79,12 @@ class FitSettings:
     seed: int = 0
 
     def __post_init__(self):
-        if self.method not in ("auto", "lm", "adam"):
-            raise ValueError(f"method must be auto, lm or adam, not {self.method!r}")
+        from abs.fitting.optimisers import names
+
+        known = ("auto", *names())
+        if self.method not in known:
+            raise ValueError(f"method must be {', '.join(known[:-1])} or {known[-1]}, "
+                             f"not {self.method!r}")
         if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1:
             raise ValueError("spp, downsample and max_iterations must be >= 1")
 

@@ -47,7 +47,7 @@ def radial_moments(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         Dimensionless (``r`` in units of the focal length).
     """
     b = camera.block
-    # Fine camera: K_fine = S^-1 K (see abs.fitting.observations.downsample_camera).
+    # Fine camera: K_fine = S^-1 K (see abs.model.downsampling.downsample_camera).
     shift = -(b - 1) / (2.0 * b)
     S = np.array([[1.0 / b, 0.0, shift], [0.0, 1.0 / b, shift], [0.0, 0.0, 1.0]])
     k_fine = np.linalg.solve(S, camera.K)

@@ -48,7 +48,7 @@ class LogPrior:
 
     @classmethod
     def from_vector(cls, vector, priors: dict) -> "LogPrior":
-        """Bounds of a :class:`~abs.fitting.parameters.ParameterVector` and the scene's
+        """Bounds of a :class:`~abs.model.parameters.ParameterVector` and the scene's
         ``[fit.priors]`` (``Scene.fit_priors``: name -> object with ``mean`` and ``sd``)."""
         mean, sd = np.zeros(vector.size), np.full(vector.size, np.inf)
         for name, s in vector.slices().items():
@@ -142,23 +142,18 @@ class RenderPosterior:
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
     def problem(self):
-        """This thread's :class:`~abs.fitting.problem.FitProblem` (compiled on first use)."""
+        """This thread's :class:`~abs.model.problem.FitProblem` (compiled on first use)."""
         cache = getattr(_LOCAL, "problems", {})
         if self.token not in cache:
             if self.variant:
                 from abs.render.variant import set_variant
 
                 set_variant(self.variant)
-            from abs.fitting.fit import prepare
-            from abs.fitting.observations import observe
-            from abs.fitting.parameters import ParameterVector
-            from abs.fitting.problem import FitProblem
+            from abs.model import build_model
 
             scene = Path(self.scene) if isinstance(self.scene, str) else self.scene
-            _, compiled, capture, names = prepare(scene, self.capture, self.names)
-            vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-            self.adopt(FitProblem(compiled, vector, [observe(v, self.downsample)
-                                                     for v in capture.train_views], self.clamp))
+            model = build_model(scene, self.capture, self.names)
+            self.adopt(model.problem("train", self.downsample, self.clamp))
         return _LOCAL.problems[self.token]
 
     def adopt(self, problem) -> None:

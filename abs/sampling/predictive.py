@@ -26,19 +26,35 @@ class PredictiveView:
     sd: np.ndarray
 
 
-def posterior_predictive(compiled, capture, vector, chain: np.ndarray, draws: int, spp: int,
-                         seed: int, clamp: float | None = None, counter=None) -> list[PredictiveView]:
-    """Render every view of ``capture`` (holdout views included) at ``draws`` posterior samples
-    spread evenly over the flattened ``chain`` (S, W, P)."""
-    from abs.fitting.observations import observe
-    from abs.fitting.problem import FitProblem, RenderCounter
+def posterior_predictive(model, chain: np.ndarray, draws: int, spp: int, seed: int,
+                         clamp: float | None = None) -> list[PredictiveView]:
+    """Render every view of the model's capture (holdout views included) at ``draws`` posterior
+    samples spread evenly over the flattened ``chain``.
 
+    Parameters
+    ----------
+    model : abs.model.ForwardModel
+        The sampled model; its renders are counted by its counter.
+    chain : ndarray, shape (S, W, P)
+        Steps, walkers, scalars (the model vector's units).
+    draws : int
+        Posterior samples to render.
+    spp : int
+        Samples per pixel.
+    seed : int
+        The one seed of every draw's render (common random numbers).
+    clamp : float or None
+        Clamp of the compared renderings, as in the likelihood.
+
+    Returns
+    -------
+    list of PredictiveView
+    """
     flat = chain.reshape(-1, chain.shape[-1])
     if draws < 1 or flat.shape[0] == 0:
         return []
     picks = flat[np.linspace(0, flat.shape[0] - 1, min(draws, flat.shape[0])).astype(int)]
-    problem = FitProblem(compiled, vector, [observe(v) for v in capture.views], clamp,
-                         counter=counter or RenderCounter())
+    problem = model.problem("all", 1, clamp)
     out = []
     for obs in problem.observations:
         images = np.stack([problem.render(obs, theta, spp, seed) for theta in picks])

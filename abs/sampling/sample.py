@@ -289,7 +289,7 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
     Monte-Carlo noise (caustics, glass) do not swamp it; scaled by ``M / (M - P)`` for the fitted
     scalars.
     """
-    from abs.fitting.observations import estimate_image_noise
+    from abs.model.noise import estimate_image_noise
 
     r_bar = 0.5 * (problem.residuals(theta, spp, seed)[0] + problem.residuals(theta, spp, seed + 1)[0])
     dof = r_bar.size / max(r_bar.size - theta.size, 1)
@@ -367,19 +367,15 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     """
     import mitsuba as mi
 
-    from abs.fitting.fit import prepare
-    from abs.fitting.observations import observe
-    from abs.fitting.parameters import ParameterVector
-    from abs.fitting.problem import FitProblem
+    from abs.model import build_model
 
     t0 = time.perf_counter()
     stage = on_stage or (lambda message: None)
     chain_path = Path(chain_path)
-    scene, compiled, capture_obj, names = prepare(scene, capture, parameters)
-    capture = capture_obj.folder
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
-    problem = FitProblem(compiled, vector, [observe(v, settings.downsample)
-                                            for v in capture_obj.train_views], settings.clamp)
+    model = build_model(scene, capture, parameters)
+    scene, names, vector = model.scene, model.names, model.vector
+    capture = model.capture.folder
+    problem = model.problem("train", settings.downsample, settings.clamp)
     identity = _identity(scene, capture, names, settings)
     resuming = resume and chain_path.exists()
     if resuming:
@@ -468,9 +464,9 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     sizes = vector.sizes
     rhat = r_hat(inference_data(chain, names, sizes), names) if chain.shape[0] >= 4 else None
     stage(f"posterior predictive ({settings.predictive_draws} draws)")
-    predictive = posterior_predictive(compiled, capture_obj, vector, chain, settings.predictive_draws,
+    predictive = posterior_predictive(model, chain, settings.predictive_draws,
                                       settings.eval_spp or scene.render.spp, settings.seed + 900,
-                                      settings.clamp, problem.counter)
+                                      settings.clamp)
     renders = (renders_before + problem.counter.renders - renders_during
                + progress.evaluations * per_eval)
     return SampleResult(tuple(names), sizes, vector.units, vector.labels(), chain, log_prob, progress,

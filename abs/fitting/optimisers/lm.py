@@ -1,4 +1,4 @@
-"""The two optimisers of a fit, over the unconstrained vector ``z`` (see ``parameters.py``).
+"""``lm``: Levenberg-Marquardt, then a Gauss-Newton refinement on decorrelated renders.
 
 - :func:`levenberg_marquardt`: optimistix's Levenberg-Marquardt on the residual vector, with the
   renderer's forward-mode Jacobian (``jax_bridge.py``). Second order: few iterations, each
@@ -13,121 +13,122 @@
   shortened by the Jacobian noise; its steps grow while they keep pointing the same way (the
   unbiased solution can be many typical steps away); its iterates that have arrived are averaged,
   and their scatter is the Monte-Carlo part of the standard errors.
-- :func:`adam`: Adam on stochastic gradients (a new render seed per iteration), with spp and
-  resolution schedules; the choice for many scalars. The result is the average of the last
-  quarter of the iterates, which cancels most of the Monte-Carlo jitter of the final steps.
 
-Both report every iteration to ``on_iteration`` (progress, checkpoints: kept out of here) and can
-start from a saved :class:`OptimizerState`.
+Both phases are one optimiser because the refinement starts where Levenberg-Marquardt stopped
+and a resumed fit must know which phase it was in (:class:`LMState`).
 """
 
 from __future__ import annotations
 
-import queue
-import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from abs.fitting.jax_bridge import residual_function
+from abs.fitting.jax_bridge import on_calling_thread, residual_function
+from abs.fitting.optimisers import Callback, Optimiser, OptimizerState, register
 
-__all__ = ["OptimizerState", "levenberg_marquardt", "gauss_newton_refinement", "cross_curvature",
-           "averaged_refinement_points", "adam"]
+__all__ = ["LevenbergMarquardt", "LMState", "RefinementState", "levenberg_marquardt",
+           "gauss_newton_refinement", "cross_curvature", "averaged_refinement_points"]
 
 
-@dataclass
-class OptimizerState:
-    """Where an optimisation stands (JSON-serialisable through :meth:`to_dict`).
+@dataclass(frozen=True, eq=False)
+class RefinementState:
+    """The Gauss-Newton refinement so far.
 
     Attributes
     ----------
-    method : str
-        ``"lm"`` or ``"adam"``.
-    iteration : int
-        Iterations done.
-    z : ndarray
-        Current unconstrained parameters (LM: the last accepted point).
-    history : list of dict
-        One entry per iteration: ``iteration``, ``loss`` (RMSE of the residuals), ``z``.
-    moments : dict
-        Adam's first and second moments (``m``, ``v``) and its iterate sum for averaging.
+    points : tuple of ndarray
+        The points ``z`` stepped to (unconstrained, typical steps), in order.
+    clipped : tuple of bool
+        Per point: reached by a step clipped to the trust radius (still travelling).
+    radius : float or None
+        The trust radius (largest change of any coordinate, typical steps); ``None`` before the
+        first step.
+    step : ndarray or None
+        The last step, to tell whether the next one turns back.
     """
 
-    method: str
-    iteration: int
-    z: np.ndarray
-    history: list[dict] = field(default_factory=list)
-    moments: dict[str, list] = field(default_factory=dict)
+    points: tuple = ()
+    clipped: tuple = ()
+    radius: float | None = None
+    step: np.ndarray | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class LMState:
+    """What the ``lm`` optimiser remembers between iterations (and across a resume).
+
+    Attributes
+    ----------
+    converged : bool or None
+        Levenberg-Marquardt's verdict once it has finished (``None``: not yet).
+    refinement : RefinementState
+    """
+
+    converged: bool | None = None
+    refinement: RefinementState = RefinementState()
 
     def to_dict(self) -> dict:
-        return {"method": self.method, "iteration": self.iteration, "z": list(map(float, self.z)),
-                "history": self.history, "moments": self.moments}
+        # Keys as checkpoints have always had them (the state was a dictionary once).
+        out = {}
+        if self.converged is not None:
+            out["lm_converged"] = self.converged
+        r = self.refinement
+        if r.points:
+            out.update(refinement=[np.asarray(p).tolist() for p in r.points],
+                       refinement_clipped=list(r.clipped), refinement_radius=r.radius,
+                       refinement_step=None if r.step is None else np.asarray(r.step).tolist())
+        return out
 
     @classmethod
-    def from_dict(cls, d: dict) -> "OptimizerState":
-        return cls(str(d["method"]), int(d["iteration"]), np.asarray(d["z"], np.float64),
-                   list(d.get("history", [])), dict(d.get("moments", {})))
+    def from_dict(cls, d: dict) -> "LMState":
+        points = tuple(np.asarray(p, np.float64) for p in d.get("refinement", []))
+        step = d.get("refinement_step")
+        radius = d.get("refinement_radius")
+        refinement = RefinementState(points,
+                                     tuple(bool(c) for c in d.get("refinement_clipped",
+                                                                  [False] * len(points))),
+                                     None if radius is None else float(radius),
+                                     None if step is None else np.asarray(step, np.float64))
+        converged = d.get("lm_converged")
+        return cls(None if converged is None else bool(converged), refinement)
 
 
-Callback = Callable[[OptimizerState], None]
+@register("lm")
+class LevenbergMarquardt(Optimiser):
+    """Levenberg-Marquardt on one fixed-seed render, then ``refinement_steps`` Gauss-Newton
+    steps on fresh, independent renders (see the module docstring).
 
-
-class _on_calling_thread:
-    """Run a JAX host callback on the thread that started the solve.
-
-    XLA may run host callbacks on its own threads, but Dr.Jit's AD state is per thread (a
-    forward pass started on another thread refuses the graph recorded here). So the solver runs on
-    a helper thread and every callback is posted back to the calling thread, which serves them
-    until the solver returns.
+    Uses the settings ``max_iterations``, ``rtol``, ``atol``, ``refinement_steps`` and ``seed``.
     """
 
-    _requests: queue.Queue | None = None
+    State = LMState
 
-    def __init__(self, function):
-        self.function = function
+    def run(self, objective, state: OptimizerState, settings,
+            on_iteration: Callback | None = None) -> OptimizerState:
+        solver = state.solver or LMState()
+        # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
+        if not solver.converged and not solver.refinement.points:
+            state = levenberg_marquardt(lambda z, iteration: objective.residuals(z, settings.seed),
+                                        state, objective.n_residuals, settings.max_iterations,
+                                        settings.rtol, settings.atol, on_iteration)
 
-    def __call__(self, *args):
-        requests = type(self)._requests
-        if requests is None:  # no solve in progress: a direct call
-            return self.function(*args)
-        reply: queue.Queue = queue.Queue(maxsize=1)
-        requests.put((self.function, args, reply))
-        ok, value = reply.get()
-        if not ok:
-            raise value
-        return value
+        def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
+            base = settings.seed + 10_000 * iteration
+            r, J1, loss = objective.residuals(z, base + 1, base + 2)
+            return r, (J1, objective.jacobian(z, base + 3)), loss
 
-    @classmethod
-    def run(cls, solve):
-        cls._requests = requests = queue.Queue()
-        outcome: dict = {}
+        return gauss_newton_refinement(fresh, state, settings.refinement_steps,
+                                       on_iteration=on_iteration)
 
-        def worker():
-            try:
-                outcome["value"] = solve()
-            except BaseException as exc:  # noqa: BLE001 (re-raised on the calling thread)
-                outcome["error"] = exc
-            requests.put(None)
-
-        threading.Thread(target=worker, daemon=True, name="abs-optimistix").start()
-        try:
-            while (item := requests.get()) is not None:
-                function, args, reply = item
-                try:
-                    reply.put((True, function(*args)))
-                except BaseException as exc:  # noqa: BLE001 (handed to the solver thread)
-                    outcome.setdefault("callback_error", exc)
-                    reply.put((False, exc))
-        finally:
-            cls._requests = None
-        if "callback_error" in outcome:
-            raise outcome["callback_error"]
-        if "error" in outcome:
-            raise outcome["error"]
-        return outcome["value"]
+    def averaged_points(self, state: OptimizerState) -> np.ndarray | None:
+        refinement = (state.solver or LMState()).refinement
+        if not refinement.points:
+            return None
+        return averaged_refinement_points(refinement.points, refinement.clipped)
 
 
 def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
@@ -168,13 +169,14 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, 
             on_iteration(state)
         return r, J
 
-    fn = residual_function(_on_calling_thread(counted), n_residuals, n)
+    fn = residual_function(on_calling_thread(counted), n_residuals, n)
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    solution = _on_calling_thread.run(
+    solution = on_calling_thread.run(
         lambda: optx.least_squares(lambda z, args: fn(z), solver, jnp.asarray(state.z, jnp.float64),
                                    max_steps=remaining, throw=False))
     final = np.asarray(solution.value, np.float64)
-    state.moments["lm_converged"] = bool(solution.result == optx.RESULTS.successful)
+    state.solver = replace(state.solver or LMState(),
+                           converged=bool(solution.result == optx.RESULTS.successful))
     # The solver's accepted point is its answer; it equals the best evaluated point unless the
     # last trial was rejected, in which case both are the same accepted point.
     state.z = final if np.all(np.isfinite(final)) else best["z"]
@@ -240,10 +242,12 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
     max_step : float
         Initial and smallest trust radius (typical steps).
     """
-    points = [np.asarray(p, np.float64) for p in state.moments.get("refinement", [])]
-    travelling = list(state.moments.get("refinement_clipped", [False] * len(points)))
-    radius = float(state.moments.get("refinement_radius", max_step))
-    previous = state.moments.get("refinement_step")
+    solver = state.solver or LMState()
+    saved = solver.refinement
+    points = [np.asarray(p, np.float64) for p in saved.points]
+    travelling = list(saved.clipped) if saved.clipped else [False] * len(points)
+    radius = float(max_step if saved.radius is None else saved.radius)
+    previous = saved.step
     z = points[-1] if points else np.array(state.z, np.float64)
     while len(points) < steps:
         state.iteration += 1
@@ -265,44 +269,10 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
         points.append(z)
         travelling.append(clipped)
         previous = step
-        state.moments.update(refinement=[p.tolist() for p in points], refinement_clipped=travelling,
-                             refinement_radius=radius, refinement_step=step.tolist())
+        solver = replace(solver, refinement=RefinementState(tuple(points), tuple(travelling),
+                                                            radius, step))
+        state.solver = solver
         state.z = np.mean(averaged_refinement_points(points, travelling), axis=0)
         if on_iteration is not None:
             on_iteration(state)
-    return state
-
-
-def adam(gradient: Callable[[np.ndarray, int], tuple[float, np.ndarray]], state: OptimizerState,
-         max_iterations: int, learning_rate: float = 0.05, betas=(0.9, 0.999), eps: float = 1e-8,
-         on_iteration: Callback | None = None) -> OptimizerState:
-    """Adam (Kingma & Ba 2015) on ``gradient(z, iteration) -> (rmse, dL/dz)``.
-
-    Returns the state whose ``z`` is the mean of the iterates of the last quarter of the run.
-    """
-    m = np.asarray(state.moments.get("m", np.zeros_like(state.z)), np.float64)
-    v = np.asarray(state.moments.get("v", np.zeros_like(state.z)), np.float64)
-    tail = np.asarray(state.moments.get("tail_sum", np.zeros_like(state.z)), np.float64)
-    tail_count = int(state.moments.get("tail_count", 0))
-    tail_start = max_iterations - max(1, max_iterations // 4)
-    z = np.array(state.z, np.float64)
-    while state.iteration < max_iterations:
-        loss, g = gradient(z, state.iteration)
-        t = state.iteration + 1
-        m = betas[0] * m + (1 - betas[0]) * g
-        v = betas[1] * v + (1 - betas[1]) * g * g
-        step = learning_rate * (m / (1 - betas[0] ** t)) / (np.sqrt(v / (1 - betas[1] ** t)) + eps)
-        state.history.append({"iteration": t, "loss": float(loss), "z": list(map(float, z))})
-        z = z - step
-        state.iteration = t
-        if t > tail_start:
-            tail += z
-            tail_count += 1
-        state.z = z
-        state.moments = {"m": m.tolist(), "v": v.tolist(), "tail_sum": tail.tolist(),
-                         "tail_count": tail_count}
-        if on_iteration is not None:
-            on_iteration(state)
-    if tail_count:
-        state.z = tail / tail_count
     return state

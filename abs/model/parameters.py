@@ -1,5 +1,10 @@
 """The fitted parameters as one flat vector, and the transforms that keep optimisers in bounds.
 
+Renderers take parameters by name and per-channel arrays; optimisers, samplers and the Laplace
+approximation take one flat vector. :class:`ParameterVector` is the one layout between them, so
+that a fit's covariance, a chain's columns and a diagnosis's Jacobian columns name the same
+scalars in the same order.
+
 Optimisers work on an unconstrained vector ``z``; each scalar maps to its physical value by
 
 - ``lower + (upper - lower) * sigmoid(k * z)`` when both bounds are finite (``glass.ior`` in

@@ -1,4 +1,9 @@
-"""The fitting problem: residuals between renderings and photographs, and their derivatives.
+"""The forward problem: residuals between renderings and photographs, and their derivatives.
+
+Fitting, sampling and diagnosis all ask the same questions of a scene and a capture: what are the
+residuals at these parameter values, and how do they change. They ask them through one class, so
+that seeds, clamping, the residual order and render accounting agree between a fit and the
+posterior or the diagnosis built on it.
 
 :class:`FitProblem` owns a compiled scene, the compared views and the parameter layout. Its
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
@@ -25,11 +30,12 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from abs.fitting.observations import Observation
-from abs.fitting.parameters import ParameterVector
+from abs.model.counter import RenderCounter
+from abs.model.observations import Observation
+from abs.model.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
 
-__all__ = ["FitProblem"]
+__all__ = ["FitProblem", "render_views"]
 
 
 def _view_seed(seed: int, view: int) -> int:
@@ -37,18 +43,6 @@ def _view_seed(seed: int, view: int) -> int:
     ...): distinct per view, and the same in every method, so residuals, Jacobians and gradients
     seeded alike see the same samples."""
     return seed * 1009 + view * 101
-
-
-@dataclass
-class RenderCounter:
-    """How much rendering a fit used."""
-
-    renders: int = 0
-    samples: int = 0
-
-    def add(self, camera, spp: int) -> None:
-        self.renders += 1
-        self.samples += camera.width * camera.height * spp
 
 
 @dataclass
@@ -67,6 +61,8 @@ class FitProblem:
         ``clamp``, e.g. 1.0 for low-dynamic-range images); clamped pixels carry no gradient.
     max_depth : int or None
         Path length (default: the scene's).
+    counter : RenderCounter
+        Where renders are counted (shared by the problems of one model).
     """
 
     compiled: CompiledScene
@@ -242,3 +238,29 @@ class FitProblem:
                     grad[i] += float(np.sum(derivative if channel is None else derivative[..., channel]))
         self.set_values(theta)
         return total, grad
+
+
+def render_views(problem: FitProblem, observations: list[Observation], theta: np.ndarray, spp: int,
+                 seed: int) -> dict[str, np.ndarray]:
+    """Renderings of ``observations`` at ``theta`` by name, view ``i`` seeded ``seed + 7 i``: a fit's
+    before/after images (and the diagnosis's holdout renders) are made this one way, so that they
+    share their Monte-Carlo noise.
+
+    Parameters
+    ----------
+    problem : FitProblem
+        Renders (its clamp is not applied: these are the images as rendered).
+    observations : list of Observation
+    theta : ndarray, shape (P,)
+        Physical parameter values (the vector's units).
+    spp : int
+        Samples per pixel.
+    seed : int
+        Base seed.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (H, W, 3)
+        Linear RGB.
+    """
+    return {o.name: problem.render(o, theta, spp, seed + 7 * i) for i, o in enumerate(observations)}

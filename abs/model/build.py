@@ -1,0 +1,132 @@
+"""The one way to build the forward model that fitting, sampling and diagnosis share.
+
+A fit, a posterior and a diagnosis all need the same objects: the scene compiled for the
+renderer, the capture, the layout of the named parameters as one vector, and problems that
+compare renderings with photographs over some views at some resolution. Built by hand in each
+place they drifted apart in small ways (which values the layout starts from, which views, which
+counter); :func:`build_model` builds them once, and :meth:`ForwardModel.problem` gives the
+problems over it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from abs.errors import InputError
+from abs.model.counter import RenderCounter
+from abs.model.inputs import prepare
+from abs.model.observations import observe
+from abs.model.parameters import ParameterVector
+from abs.model.problem import FitProblem
+
+__all__ = ["ForwardModel", "build_model", "VIEWS"]
+
+#: Which views of the capture a problem compares.
+VIEWS = ("train", "holdout", "all")
+
+
+@dataclass
+class ForwardModel:
+    """A compiled scene, its capture and the layout of the parameters that vary.
+
+    Attributes
+    ----------
+    scene : Scene
+        The scene as loaded (priors, render settings, materials).
+    compiled : CompiledScene
+        The scene compiled for the renderer; holds the current parameter values.
+    capture : Capture
+    vector : ParameterVector
+        The varying parameters, laid out from their starting values.
+    counter : RenderCounter
+        Counts the renders of every problem of this model.
+    """
+
+    scene: object
+    compiled: object
+    capture: object
+    vector: ParameterVector
+    counter: RenderCounter = field(default_factory=RenderCounter)
+    _problems: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The varying parameters' names, in the vector's order."""
+        return self.vector.names
+
+    def problem(self, views: str = "train", downsample: int = 1,
+                clamp: float | None = None) -> FitProblem:
+        """Residuals of this model against some of its capture's views.
+
+        Problems are kept by their arguments: the photographs of a view are read and reduced
+        once per resolution, however often a run asks (Adam's schedules switch back and forth).
+
+        Parameters
+        ----------
+        views : {"train", "holdout", "all"}
+            The capture's training views, holdout views, or all of them (in ``cameras.json``
+            order).
+        downsample : int
+            Compare images box-averaged by this integer factor (renders at the reduced
+            resolution).
+        clamp : float or None
+            Clamp renderings at this value before comparing (photographs that saturate).
+
+        Returns
+        -------
+        FitProblem
+            Shares this model's compiled scene, vector and counter.
+        """
+        if views not in VIEWS:
+            raise ValueError(f"views must be one of {', '.join(VIEWS)}, not {views!r}")
+        key = (views, int(downsample), clamp)
+        if key not in self._problems:
+            chosen = {"train": self.capture.train_views, "holdout": self.capture.holdout_views,
+                      "all": self.capture.views}[views]
+            self._problems[key] = FitProblem(self.compiled, self.vector,
+                                             [observe(v, downsample) for v in chosen], clamp,
+                                             counter=self.counter)
+        return self._problems[key]
+
+
+def build_model(scene, capture, parameters: Sequence[str] | None = None,
+                initial: Mapping[str, object] | None = None) -> ForwardModel:
+    """Load, compile and check a scene and capture, and lay out the parameters that vary.
+
+    Parameters
+    ----------
+    scene : Scene or path
+        The scene file (TOML) or a loaded scene; its current values are the starting point.
+    capture : Capture or path
+        The capture folder (``cameras.json``) or a loaded capture.
+    parameters : sequence of str, optional
+        Parameter names (``glass.absorption``, ``environment.scale``, ``sphere.pose``...);
+        default: the scene's ``[fit] parameters``.
+    initial : mapping, optional
+        Starting values by parameter name (the parameters' units), instead of the scene's. They
+        are written into the compiled scene, and the vector is laid out from the values it then
+        holds.
+
+    Returns
+    -------
+    ForwardModel
+
+    Raises
+    ------
+    InputError
+        No parameters, an unknown parameter name, no training view, or an ``initial`` value that
+        names another parameter or has the wrong size.
+    """
+    scene, compiled, capture, names = prepare(scene, capture, parameters)
+    for name, value in (initial or {}).items():
+        if name not in names:
+            raise InputError(None, "initial", f"{name!r} is not among the fitted parameters {names}")
+        try:
+            compiled.set(name, np.asarray(value, np.float64))
+        except ValueError as exc:
+            raise InputError(None, f"initial.{name}", str(exc)) from None
+    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    return ForwardModel(scene, compiled, capture, vector)
