@@ -14,7 +14,7 @@ from abs.fitting.optimizers import (OptimizerState, adam, cross_curvature, gauss
                                    levenberg_marquardt)
 from abs.fitting.parameters import ParameterVector
 from abs.fitting.settings import parse_schedule, schedule_value
-from abs.io.fit_files import load_checkpoint, save_checkpoint
+from abs.runs.files import load_checkpoint, save_checkpoint
 from abs.params.names import Parameter
 
 

@@ -36,7 +36,7 @@ def run(args) -> int:
 
     from abs.diagnosis import diagnose
     from abs.fitting import FitSettings
-    from abs.io.fit_files import write_json
+    from abs.runs.files import write_json
     from abs.report.diagnosis_report import write_diagnosis_report
 
     settings = FitSettings(spp=args.spp, downsample=args.downsample, clamp=args.clamp,

@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from abs.io.fit_files import write_json
+from abs.runs.files import write_json
 from abs.studies.parallel import map_tasks
 from abs.studies.sl_paper import default_paper_tables_path, read_paper_tables
 from abs.studies.sl_rig import default_rig
