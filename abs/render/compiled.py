@@ -21,6 +21,7 @@ import numpy as np
 from abs.errors import SceneError
 from abs.params.names import Parameter, parameter_specs
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
+from abs.render.brdf_tables import bind_coefficients
 from abs.render.camera import Camera
 from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
@@ -35,6 +36,11 @@ __all__ = ["CompiledScene", "compile_scene", "rotation_matrix"]
 # the same seed gives the same samples in each; 2^21 keeps the forward mode's doubled loop state
 # well under a gigabyte.
 MAX_SAMPLES_IN_FLIGHT = 1 << 21
+
+# Material fields whose Mitsuba value is computed from the parameter in Dr.Jit, by material type.
+# The computation lives here, in the renderer bridge, because abs.scene (where the materials are)
+# sits below abs.render and must not import it (docs/architecture.md).
+_DRJIT_BINDINGS = {"brdf_pca": bind_coefficients}
 
 
 def rotation_matrix(r) -> mi.Matrix3f:
@@ -151,7 +157,11 @@ class CompiledScene:
             material = self.scene.materials[owner]
             mspec = material.parameters()[field]
             if mspec.mitsuba_key is None:
-                material.apply(field, value, self.params)
+                binding = _DRJIT_BINDINGS.get(material.type_name)
+                if binding is not None:
+                    binding(material, field, value, self.params)
+                else:
+                    material.apply(field, value, self.params)
             else:
                 key = f"{owner}.{mspec.mitsuba_key}"
                 target = self.params[key]
