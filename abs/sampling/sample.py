@@ -349,7 +349,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     resume : bool
         Continue the chain in ``chain_path`` (refused if it belongs to another problem).
     pool : object with ``map``, optional
-        From :func:`abs.sampling.pools.evaluation_pool`.
+        From :func:`abs.pools.worker_pool`.
     on_step : callable, optional
         Called with an :class:`EnsembleProgress` after every step.
     on_stage : callable, optional

@@ -10,7 +10,7 @@ scanner's estimate (:mod:`~abs.studies.sl_noise`), collects BRDF samples
 Lambertian fit to the same samples, a baseline the basis must beat.
 
 Tasks and results are plain dicts (JSON-ready, picklable), so they run in local processes or on a
-Dask cluster (:mod:`abs.studies.parallel`) and are checkpointed one file each by the caller.
+Dask cluster (:mod:`abs.pools`) and are checkpointed one file each by the caller.
 """
 
 from __future__ import annotations
