@@ -16,6 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "abs"
 DOC = ROOT / "docs" / "architecture.md"
+PICTURE = ROOT / "docs" / "architecture.svg"
 
 
 def read_layers(text: str) -> dict[str, int]:
@@ -109,3 +110,12 @@ def test_the_table_orders_the_known_loop():
     assert layers["io"] < layers["brdf"] < layers["scene"] < layers["render"] < layers["fitting"]
     assert layers["colour"] < layers["metrics"] < layers["report"] < layers["runs"]
     assert layers["render"] < layers["model"] < min(layers["fitting"], layers["sampling"], layers["diagnosis"])
+
+
+def test_the_picture_shows_every_package_of_the_table():
+    """docs/architecture.svg is drawn from the table (docs/architecture_picture.py): a package
+    added to the table without redrawing it is missing from the picture."""
+    layers = read_layers(DOC.read_text(encoding="utf-8"))
+    shown = set(re.findall(r">([A-Za-z_][A-Za-z0-9_]*)</text>", PICTURE.read_text(encoding="utf-8")))
+    missing = sorted(set(layers) - shown)
+    assert not missing, f"docs/architecture.svg lacks {missing}: run python docs/architecture_picture.py"
