@@ -52,10 +52,10 @@ def run(args) -> int:
 
     from abs.fitting import FitSettings, OptimizerState, fit
     from abs.fitting.settings import parse_schedule
+    from abs.report.text import summary_lines
     from abs.runs.files import load_checkpoint, save_checkpoint
     from abs.runs.fit_folder import FIT_FILE, write_fit_folder
     from abs.runs.identity import run_identity
-    from abs.report.text import summary_lines
     from abs.simulate import read_truth
     from abs.scene import load_scene
 

@@ -162,8 +162,8 @@ def main(argv=None) -> int:
         print(markdown)
         return 0
 
-    from abs.runs.files import write_json
     from abs.render.variant import set_variant
+    from abs.runs.files import write_json
 
     set_variant()
     names = QUICK if args.cases == "quick" else ([c.name for c in CASES] if args.cases == "all"
