@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from abs.errors import InputError
-from abs.io.images import linear_to_srgb
+from abs.colour.srgb import linear_to_srgb
 
 __all__ = ["rmse", "ssim", "log_error"]
 

@@ -27,7 +27,7 @@ import numpy as np
 from emcee.autocorr import integrated_time
 
 from abs.fitting import FitSettings, fit
-from abs.io.fit_files import write_json
+from abs.runs.files import write_json
 from abs.sampling import SampleSettings, sample
 from abs.sampling.independence import independence_sampler
 from sampling_data import PARAMETER, make_dataset

@@ -30,7 +30,7 @@ import numpy as np
 from scipy import stats
 
 from abs.fitting import FitSettings, fit
-from abs.io.fit_files import write_json
+from abs.runs.files import write_json
 from abs.sampling import SampleSettings, sample
 from sampling_data import PARAMETER, make_dataset
 

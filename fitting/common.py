@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 import abs
-from abs.io.fit_files import write_fit_folder
+from abs.runs.fit_folder import write_fit_folder
 from abs.report.text import summary_lines
 from abs.simulate import read_truth
 

@@ -190,7 +190,7 @@ def test_debevec_recovers_a_known_response_and_merges_to_truth():
 @pytest.mark.skipif(not FROBISHER.is_dir(), reason=f"shared data absent: {FROBISHER}")
 def test_debevec_on_real_jpeg_bracket():
     from abs.acquisition.response import recover_response
-    from abs.io.images import srgb_to_linear
+    from abs.colour.srgb import srgb_to_linear
 
     frames = []
     for name in ("IMG_2600.jpg", "IMG_2601.jpg", "IMG_2602.jpg"):

@@ -17,11 +17,11 @@ from abs.brdf.basis import (  # noqa: E402
     BRDFBasis,
     map_brdf,
     merl_cosine_weight,
-    table_from_coefficients,
     unmap_brdf,
 )
 from abs.errors import InputError  # noqa: E402
 from abs.io.merl import MERL_SIZE  # noqa: E402
+from abs.render.brdf_tables import table_from_coefficients  # noqa: E402
 
 EPS = 1e-3
 K = 3

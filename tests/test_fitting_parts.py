@@ -13,9 +13,9 @@ from abs.fitting.optimisers import OptimizerState
 from abs.fitting.optimisers.adam import adam
 from abs.fitting.optimisers.lm import cross_curvature, gauss_newton_refinement, levenberg_marquardt
 from abs.fitting.settings import parse_schedule, schedule_value
-from abs.io.fit_files import load_checkpoint, save_checkpoint
 from abs.model import ParameterVector, estimate_image_noise
 from abs.model.downsampling import downsample, downsample_camera
+from abs.runs.files import load_checkpoint, save_checkpoint
 from abs.params.names import Parameter
 
 

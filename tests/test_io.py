@@ -9,9 +9,10 @@ import numpy as np
 import OpenEXR
 import pytest
 
+from abs.colour.srgb import linear_to_srgb, srgb_to_linear
+from abs.colour.tonemap import tonemap
 from abs.errors import InputError
-from abs.io.images import (image_size, linear_to_srgb, read_image, read_mask, srgb_to_linear,
-                           tonemap, write_exr, write_mask, write_png)
+from abs.io.images import image_size, read_image, read_mask, write_exr, write_mask, write_png
 
 SHARED_EXR = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
               / "blender_studiolights_world_cc0").resolve()

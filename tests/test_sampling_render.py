@@ -139,7 +139,7 @@ def test_dask_workers_evaluate_the_same_posterior(glass_scene_dir, capture):
     the same fixed seeds, returns the same log-posterior as this process."""
     from dask.distributed import Client, LocalCluster
 
-    from abs.sampling.pools import evaluation_pool
+    from abs.pools import worker_pool
     from abs.sampling.posterior import LogPrior, RenderPosterior
 
     posterior = RenderPosterior(glass_scene_dir / "scene.toml", str(capture), ("environment.scale",),
@@ -149,7 +149,7 @@ def test_dask_workers_evaluate_the_same_posterior(glass_scene_dir, capture):
     local = [posterior(p) for p in positions]
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster, Client(cluster) as client:
-        with evaluation_pool(scheduler=client) as pool:
+        with worker_pool(scheduler=client) as pool:
             remote = pool.map(posterior, positions)
     assert remote[2] == -np.inf and local[2] == -np.inf
     # Equal up to float32 round-off of the renders (parallel reductions may change the last bit

@@ -151,14 +151,15 @@ def test_study_end_to_end(small_basis, tmp_path):
 def test_dask_gives_the_local_result(small_basis, tmp_path):
     """One task on an in-process Dask cluster equals the same task run locally (same seeds)."""
     distributed = pytest.importorskip("dask.distributed")
-    from abs.studies.parallel import map_tasks
+    from abs.pools import worker_pool
     from abs.studies.sl_scanner import run_task, study_tasks
 
     task = study_tasks(_config(small_basis, noise={}))[0]
     local = run_task(task)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
-        [(_, remote)] = list(map_tasks(run_task, [task], scheduler=cluster.scheduler_address))
+        with worker_pool(scheduler=cluster.scheduler_address) as pool:
+            [(_, remote)] = list(pool.as_completed(run_task, [task]))
     assert remote["delta_e_mean"] == pytest.approx(local["delta_e_mean"], rel=1e-6)
     assert remote["samples"] == local["samples"]
 

@@ -1,5 +1,8 @@
 """A PCA basis of isotropic BRDF tables: file format, the log-relative mapping, and evaluation.
 
+numpy only: the differentiable Dr.Jit evaluation used for rendering is
+:mod:`abs.render.brdf_tables`, above the renderer bridge (docs/architecture.md).
+
 A BRDF table (MERL layout, N = 3·90·90·180 values in 1/sr, see :mod:`abs.io.merl`) is
 represented as ``unmap(mean + componentsᵀ · c)`` for a small coefficient vector ``c``, the
 model of Nielsen, Jensen and Ramamoorthi, "On optimal, minimal BRDF sampling for reflectance
@@ -59,7 +62,6 @@ __all__ = [
     "merl_cosine_weight",
     "map_brdf",
     "unmap_brdf",
-    "table_from_coefficients",
 ]
 
 FORMAT_VERSION = 1
@@ -123,7 +125,7 @@ def unmap_brdf(x: np.ndarray, median: np.ndarray, w: np.ndarray, eps: float) -> 
     """Inverse of :func:`map_brdf`: f = ((median·w + ε)·exp(x) − ε) / w.
 
     No clamping: values of ``x`` below the image of f = 0 give negative f (the exact inverse).
-    :func:`table_from_coefficients` clamps at 0 for rendering.
+    :func:`abs.render.brdf_tables.table_from_coefficients` clamps at 0 for rendering.
     """
     x, median, w = np.asarray(x), np.asarray(median), np.asarray(w)
     return ((median * w + eps) * np.exp(x) - eps) / w
@@ -174,8 +176,8 @@ class BRDFBasis:
         The file the basis came from, used in error messages.
 
     Arrays are stored as float32 (K·N·4 bytes for the components). Their Dr.Jit copies are made
-    once per variant on first use by :func:`table_from_coefficients`: treat the arrays as
-    read-only.
+    once per variant on first use by :func:`abs.render.brdf_tables.table_from_coefficients`:
+    treat the arrays as read-only.
     """
 
     mean: np.ndarray
@@ -188,8 +190,6 @@ class BRDFBasis:
     singular_values: np.ndarray | None = None
     residual_variance: float | None = None
     source: str | None = field(default=None, repr=False)
-    # Dr.Jit copies of the arrays, per Mitsuba variant (filled on first use).
-    _device: dict = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         src = self.source
@@ -334,7 +334,8 @@ class BRDFBasis:
         return map_brdf(f, self.median.astype(np.float64), self.cosine_weight.astype(np.float64), self.epsilon)
 
     def table(self, coefficients: np.ndarray) -> np.ndarray:
-        """numpy counterpart of :func:`table_from_coefficients` (not differentiable).
+        """numpy counterpart of :func:`abs.render.brdf_tables.table_from_coefficients` (not
+        differentiable).
 
         Parameters
         ----------
@@ -354,58 +355,3 @@ class BRDFBasis:
             x += c_k * row
         f = unmap_brdf(x, self.median.astype(np.float64), self.cosine_weight.astype(np.float64), self.epsilon)
         return np.maximum(f, 0.0).astype(np.float32).reshape(MERL_SHAPE)
-
-    # -- Dr.Jit ---------------------------------------------------------------------------------
-    def _device_arrays(self) -> dict[str, Any]:
-        """Dr.Jit copies of the arrays for the active variant, built once."""
-        import mitsuba as mi
-
-        from abs.render.jit import from_numpy
-
-        variant = mi.variant()
-        cached = self._device.get(variant)
-        if cached is None:
-            eps = self.epsilon
-            w = self.cosine_weight.astype(np.float64)
-            # Precompute the unmap's affine terms: f = offset·exp(x)·inv_w − eps·inv_w.
-            cached = {
-                "mean": from_numpy(mi.Float, self.mean),
-                "components": [from_numpy(mi.Float, row) for row in self.components],
-                "scale": from_numpy(mi.Float, (self.median * w + eps) / w),
-                "shift": from_numpy(mi.Float, eps / w),
-            }
-            self._device[variant] = cached
-        return cached
-
-
-def table_from_coefficients(basis: BRDFBasis, coefficients: Any) -> Any:
-    """BRDF table unmap(mean + componentsᵀ·c), differentiable with respect to ``c``.
-
-    Parameters
-    ----------
-    basis : BRDFBasis
-        The basis.
-    coefficients : mi.Float
-        K coefficients (dimensionless). Gradients flow back to them through Dr.Jit's AD.
-
-    Returns
-    -------
-    mi.Float
-        N = 3·90·90·180 BRDF values in 1/sr, MERL order, clamped at 0 (so entries whose
-        reconstruction is negative have zero gradient).
-    """
-    import drjit as dr
-    import mitsuba as mi
-
-    arrays = basis._device_arrays()
-    coefficients = mi.Float(coefficients)
-    if dr.width(coefficients) != basis.n_components:
-        raise ValueError(
-            f"expected {basis.n_components} coefficients (one per component), got {dr.width(coefficients)}"
-        )
-    x = arrays["mean"]
-    for k, row in enumerate(arrays["components"]):
-        # A width-1 gather keeps c[k] attached to the AD graph (indexing would return a Python float).
-        c_k = dr.gather(mi.Float, coefficients, mi.UInt32(k))
-        x = dr.fma(row, c_k, x)
-    return dr.maximum(arrays["scale"] * dr.exp(x) - arrays["shift"], 0.0)

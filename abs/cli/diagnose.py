@@ -36,8 +36,8 @@ def run(args) -> int:
 
     from abs.diagnosis import diagnose
     from abs.fitting import FitSettings
-    from abs.io.fit_files import write_json
     from abs.report.diagnosis_report import write_diagnosis_report
+    from abs.runs.files import write_json
 
     settings = FitSettings(spp=args.spp, downsample=args.downsample, clamp=args.clamp,
                            max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,

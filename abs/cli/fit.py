@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-from dataclasses import asdict
 from pathlib import Path
 
 
@@ -64,8 +62,10 @@ def run(args) -> int:
 
     from abs.fitting import FitSettings, OptimizerState, fit
     from abs.fitting.settings import parse_schedule
-    from abs.io.fit_files import FIT_FILE, load_checkpoint, save_checkpoint, write_fit_folder
     from abs.report.text import summary_lines
+    from abs.runs.files import load_checkpoint, save_checkpoint
+    from abs.runs.fit_folder import FIT_FILE, write_fit_folder
+    from abs.runs.identity import run_identity
     from abs.simulate import read_truth
     from abs.scene import load_scene
 
@@ -78,11 +78,9 @@ def run(args) -> int:
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)
-    identity = {"scene": str(scene.source), "capture": str(args.capture.resolve()),
-                "parameters": list(names or scene.fit_parameters), "initial": initial,
-                # Extending a fit (more iterations) is a resume, not a different fit.
-                "settings": {k: v for k, v in json.loads(json.dumps(asdict(settings))).items()
-                             if k not in ("max_iterations", "refinement_steps")}}
+    # Extending a fit (more iterations) is a resume, not a different fit.
+    identity = run_identity(scene, args.capture, names or scene.fit_parameters, settings, initial=initial,
+                            drop=("max_iterations", "refinement_steps"))
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     resume = None

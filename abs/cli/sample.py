@@ -64,7 +64,7 @@ def run(args) -> int:
     from abs.errors import InputError
     from abs.sampling import SampleSettings, read_start, sample
     from abs.sampling.files import CHAIN_FILE, SUMMARY_FILE, write_sample_folder
-    from abs.sampling.pools import evaluation_pool
+    from abs.pools import worker_pool
     from abs.scene import load_scene
     from abs.simulate import read_truth
 
@@ -105,7 +105,7 @@ def run(args) -> int:
             bar.reset()
             chain["first"] = True
 
-    with evaluation_pool(args.workers, args.scheduler) as pool:
+    with worker_pool(args.workers, args.scheduler) as pool:
         result = sample(scene, args.capture, names, settings, out / CHAIN_FILE, start=start,
                         resume=args.resume, pool=pool, on_step=on_step, on_stage=on_stage,
                         truth=read_truth(args.capture, chosen))

@@ -24,8 +24,8 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from abs.fitting import scan
-    from abs.io.fit_files import write_json
     from abs.report.figures import plot_scan
+    from abs.runs.files import write_json
     from abs.simulate import read_truth
 
     grid = None

@@ -37,7 +37,7 @@ from abs.diagnosis.score import CandidateScore, score_candidates
 from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model
 from abs.errors import InputError
 from abs.fitting import FitSettings
-from abs.io.fit_files import write_json
+from abs.runs.files import write_json
 
 __all__ = ["diagnose", "Diagnosis", "Finding", "Round", "DEFAULT_SETTINGS"]
 

@@ -7,10 +7,7 @@ and read back with :func:`~abs.scene.load_scene`, which validates it like any us
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +19,7 @@ from abs.scene.load import load_scene
 from abs.scene.scene import Scene
 from abs.scene.write import scene_table, write_scene
 
-__all__ = ["extend_scene", "fit_identity", "render_problem"]
+__all__ = ["extend_scene", "render_problem"]
 
 
 def extend_scene(scene: Scene, candidates: Sequence[Candidate], values: Mapping[str, object],
@@ -76,14 +73,3 @@ def render_problem(scene: Scene, capture, names: Sequence[str], holdout: bool, f
                for n in names}
     problem = model.problem("holdout" if holdout else "train", factor, clamp)
     return compiled, model.vector, np.concatenate([current[n] for n in names]), problem
-
-
-def fit_identity(scene: Scene, capture, names: Sequence[str], initial: Mapping[str, object],
-                 settings) -> dict:
-    """What makes two fits of a model file the same fit (checkpoints, saved short fits): the
-    scene file's digest, the capture folder, the parameters, their start and the settings."""
-    folder = capture.folder if hasattr(capture, "folder") else Path(capture)
-    text = Path(scene.source).read_bytes()
-    return {"scene": hashlib.sha256(text).hexdigest(), "capture": str(Path(folder).resolve()),
-            "parameters": list(names), "initial": {n: np.asarray(v).tolist() for n, v in initial.items()},
-            "settings": json.loads(json.dumps(asdict(settings)))}

@@ -24,8 +24,6 @@ from the null to the best amount (chi-square scale, like the score statistic).
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import MutableMapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -33,9 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.diagnosis.model import fit_identity, render_problem
+from abs.diagnosis.model import render_problem
 from abs.fitting.settings import FitSettings
 from abs.model import ParameterVector
+from abs.runs.identity import digest, model_identity
 
 __all__ = ["CandidateScore", "score_candidates"]
 
@@ -189,9 +188,9 @@ def _short_fit_key(scene, capture, candidate: Candidate, settings: FitSettings) 
     source = getattr(scene, "source", None)
     if source is None or not Path(source).is_file():
         return None
-    what = {**fit_identity(scene, capture, candidate.parameters, {}, settings),
+    what = {**model_identity(scene, capture, candidate.parameters, {}, settings),
             "candidate": [candidate.effect, candidate.target]}
-    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:24]
+    return digest(what, 24)
 
 
 def _restored(candidate: Candidate, entry: dict) -> CandidateScore:

@@ -27,11 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from abs.diagnosis.effects import Candidate, effect
-from abs.diagnosis.model import extend_scene, fit_identity, render_problem
+from abs.diagnosis.model import extend_scene, render_problem
 from abs.errors import InputError
 from abs.fitting import FitResult, FitSettings, OptimizerState, fit
-from abs.io.fit_files import load_checkpoint, save_checkpoint
 from abs.model import render_views
+from abs.runs.files import load_checkpoint, save_checkpoint
+from abs.runs.identity import model_identity
 
 __all__ = ["ModelFit", "Comparison", "fit_model", "compare", "HOLDOUT_Z"]
 
@@ -100,7 +101,7 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
         settings = replace(settings, downsample=1)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
-    identity = fit_identity(extended, capture, names, initial, settings)
+    identity = model_identity(extended, capture, names, initial, settings)
     state = _saved_state(folder, identity) if resume else None
     result = fit(extended, capture, names, settings, initial=initial, resume=state,
                  on_iteration=lambda s: save_checkpoint(folder, identity, s.to_dict()))

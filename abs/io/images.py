@@ -27,18 +27,17 @@ import cv2
 import numpy as np
 import OpenEXR
 
+# The sRGB transfer functions decode PNG/JPEG files and tone mapping encodes previews; both are
+# colour science, kept in abs.colour (below io in docs/architecture.md), not copied here.
+from abs.colour.srgb import as_rgb_image, srgb_to_linear
+from abs.colour.tonemap import tonemap
 from abs.errors import InputError
 
 __all__ = [
     "IMAGE_EXTENSIONS",
-    "srgb_to_linear",
-    "linear_to_srgb",
-    "luminance",
     "image_size",
     "read_image",
     "write_exr",
-    "auto_exposure",
-    "tonemap",
     "write_png",
     "read_mask",
     "write_mask",
@@ -47,41 +46,6 @@ __all__ = [
 #: File extensions :func:`read_image` understands (lower case).
 IMAGE_EXTENSIONS = (".exr", ".hdr", ".png", ".jpg", ".jpeg")
 _MASK_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".exr")
-
-# Rec. 709 luminance weights for linear RGB.
-_LUMA = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-
-
-def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
-    """Decode sRGB-encoded values in [0, 1] to linear (exact IEC 61966-2-1 EOTF).
-
-    Parameters
-    ----------
-    encoded : np.ndarray
-        sRGB-encoded values, nominally in [0, 1].
-
-    Returns
-    -------
-    np.ndarray
-        Linear values, ``float32``.
-    """
-    c = np.asarray(encoded, dtype=np.float32)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
-
-
-def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
-    """Encode linear values in [0, 1] with the exact sRGB OETF (inverse of :func:`srgb_to_linear`).
-
-    Negative inputs are clamped to 0 first (the power law is undefined for them).
-    """
-    c = np.maximum(np.asarray(linear, dtype=np.float32), 0.0)
-    return np.where(c <= 0.0031308, c * 12.92, 1.055 * c ** (1.0 / 2.4) - 0.055).astype(np.float32)
-
-
-def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Rec. 709 relative luminance ``Y`` of linear RGB, shape ``rgb.shape[:-1]``."""
-    return np.asarray(rgb, dtype=np.float32) @ _LUMA
-
 
 # --------------------------------------------------------------------------------------------
 # Reading
@@ -268,14 +232,6 @@ def read_image(path: str | Path) -> np.ndarray:
 # Writing
 
 
-def _as_rgb_array(rgb: np.ndarray) -> np.ndarray:
-    arr = np.asarray(rgb)
-    if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] == 0 or arr.shape[1] == 0:
-        raise InputError(None, "rgb", f"expected an array of shape (height, width, 3), "
-                                      f"got {arr.shape}")
-    return arr
-
-
 def write_exr(path: str | Path, rgb: np.ndarray, *, allow_nonfinite: bool = False) -> None:
     """Write linear RGB as a ``float32`` OpenEXR file with lossless ZIP compression.
 
@@ -294,7 +250,7 @@ def write_exr(path: str | Path, rgb: np.ndarray, *, allow_nonfinite: bool = Fals
     InputError
         If ``rgb`` has the wrong shape or non-finite values.
     """
-    arr = np.ascontiguousarray(_as_rgb_array(rgb), dtype=np.float32)
+    arr = np.ascontiguousarray(as_rgb_image(rgb), dtype=np.float32)
     if not allow_nonfinite:
         bad = int(np.count_nonzero(~np.isfinite(arr)))
         if bad:
@@ -303,56 +259,6 @@ def write_exr(path: str | Path, rgb: np.ndarray, *, allow_nonfinite: bool = Fals
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with OpenEXR.File(header, {"RGB": arr}) as exr:
         exr.write(str(path))
-
-
-def auto_exposure(rgb: np.ndarray) -> float:
-    """Exposure :func:`tonemap` picks by default: the 99th percentile of luminance maps to 0.9.
-
-    Computing it once from a photograph and passing it to :func:`tonemap` for the renderings of
-    the same view shows them all at the same exposure.
-
-    Parameters
-    ----------
-    rgb : np.ndarray
-        ``(height, width, 3)`` linear RGB; non-finite values are ignored.
-
-    Returns
-    -------
-    float
-        Linear multiplier; 1.0 when the image is black (or has no finite value).
-    """
-    lum = luminance(_as_rgb_array(rgb))
-    lum = lum[np.isfinite(lum)]
-    p99 = float(np.percentile(lum, 99)) if lum.size else 0.0
-    return 0.9 / p99 if p99 > 0 else 1.0
-
-
-def tonemap(rgb: np.ndarray, exposure: float | None = None) -> np.ndarray:
-    """Tone-map linear RGB to 8-bit sRGB for display.
-
-    The image is multiplied by ``exposure``; when that is ``None`` the factor is chosen so that
-    the 99th percentile of the (finite) luminance maps to 0.9, keeping highlights just below
-    white. The result is clipped to [0, 1] (NaN → 0) and sRGB-encoded. No curve, no colour
-    grading: previews only, never data.
-
-    Parameters
-    ----------
-    rgb : np.ndarray
-        ``(height, width, 3)`` linear RGB.
-    exposure : float, optional
-        Linear multiplier applied before clipping (1.0 shows the values as they are).
-
-    Returns
-    -------
-    np.ndarray
-        ``uint8`` array of shape ``(height, width, 3)``, sRGB-encoded RGB.
-    """
-    arr = _as_rgb_array(rgb).astype(np.float32)
-    if exposure is None:
-        exposure = auto_exposure(arr)
-    scaled = np.nan_to_num(arr * np.float32(exposure), nan=0.0, posinf=1.0, neginf=0.0)
-    encoded = linear_to_srgb(np.clip(scaled, 0.0, 1.0))
-    return np.round(encoded * 255.0).astype(np.uint8)
 
 
 def _write_png_bytes(path: Path, pixels: np.ndarray) -> None:
@@ -375,7 +281,7 @@ def write_png(path: str | Path, rgb: np.ndarray, exposure: float | None = None) 
     exposure : float, optional
         Passed to :func:`tonemap`.
     """
-    arr = _as_rgb_array(rgb)
+    arr = as_rgb_image(rgb)
     srgb = arr if arr.dtype == np.uint8 else tonemap(arr, exposure)
     _write_png_bytes(Path(path), np.ascontiguousarray(srgb[:, :, ::-1]))
 

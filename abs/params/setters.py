@@ -60,10 +60,10 @@ class MitsubaKeySetter:
 @dataclass(frozen=True)
 class MaterialApplySetter:
     """A material field the material itself turns into Mitsuba values
-    (:meth:`abs.scene.materials.Material.apply`: a PCA table from its coefficients)."""
+    (:meth:`abs.render.CompiledScene.bind_material`: a PCA table from its coefficients)."""
 
     material: str
     field: str
 
     def __call__(self, compiled, value) -> None:
-        compiled.scene.materials[self.material].apply(self.field, value, compiled.params)
+        compiled.bind_material(self.material, self.field, value)

@@ -21,6 +21,7 @@ import numpy as np
 from abs.errors import SceneError
 from abs.params.names import POSE_FIELD, Parameter, parameter_specs
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
+from abs.render.brdf_tables import bind_coefficients
 from abs.render.camera import Camera
 from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
@@ -35,6 +36,11 @@ __all__ = ["CompiledScene", "compile_scene", "rotation_matrix", "shape_ids"]
 # the same seed gives the same samples in each; 2^21 keeps the forward mode's doubled loop state
 # well under a gigabyte.
 MAX_SAMPLES_IN_FLIGHT = 1 << 21
+
+# Material fields whose Mitsuba value is computed from the parameter in Dr.Jit, by material type.
+# The computation lives here, in the renderer bridge, because abs.scene (where the materials are)
+# sits below abs.render and must not import it (docs/architecture.md).
+_DRJIT_BINDINGS = {"brdf_pca": bind_coefficients}
 
 
 def rotation_matrix(r) -> mi.Matrix3f:
@@ -156,6 +162,17 @@ class CompiledScene:
         # sensor members, a pose, a Mitsuba key, or the material's own binding.
         spec.setter(self, value)
         self.params.update()
+
+    def bind_material(self, name: str, field: str, value) -> None:
+        """Write material ``name``'s ``field`` that has no Mitsuba key: through the renderer's
+        Dr.Jit binding for the material's type (``_DRJIT_BINDINGS``: a PCA table from its
+        coefficients), else the material's own :meth:`~abs.scene.materials.Material.apply`."""
+        material = self.scene.materials[name]
+        binding = _DRJIT_BINDINGS.get(material.type_name)
+        if binding is not None:
+            binding(material, field, value, self.params)
+        else:
+            material.apply(field, value, self.params)
 
     def write_mitsuba(self, key: str, value: mi.Float) -> None:
         """Write ``value`` into the Mitsuba scene parameter ``key`` (``glass.ior``), converted to

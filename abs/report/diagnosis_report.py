@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
-from abs.io.images import auto_exposure, tonemap
+from abs.colour.tonemap import auto_exposure, tonemap
 from abs.metrics import log_error
 from abs.report import figures, html
 from abs.report.html import format_number, html_table

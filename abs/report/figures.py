@@ -16,7 +16,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from abs.io.images import auto_exposure, tonemap
+from abs.colour.tonemap import auto_exposure, tonemap
 from abs.metrics import log_error
 from abs.report.data import as_vector
 from abs.report.view import ReportView

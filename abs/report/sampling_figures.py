@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from abs.io.images import auto_exposure, tonemap
+from abs.colour.tonemap import auto_exposure, tonemap
 from abs.report.figures import save_figure
 
 __all__ = ["plot_corner", "plot_walker_traces", "plot_predictive"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from abs.io.fit_files import write_json
+from abs.runs.files import write_json
 
 __all__ = ["write_sample_folder", "CHAIN_FILE", "SUMMARY_FILE", "NETCDF_FILE"]
 

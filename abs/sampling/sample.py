@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -26,6 +26,8 @@ import h5py
 import numpy as np
 
 from abs.errors import InputError
+from abs.runs.files import check_identity
+from abs.runs.identity import run_identity
 from abs.sampling.calibration import calibrate_render_noise
 from abs.sampling.checks import run_checks
 from abs.sampling.ensemble import EnsembleProgress, run_ensemble
@@ -227,9 +229,9 @@ def _fit_start(scene, capture, names, settings: SampleSettings,
 
 
 def _identity(scene, capture, names, settings: SampleSettings) -> dict:
-    keep = ("spp", "downsample", "clamp", "seed")
-    return {"scene": str(getattr(scene, "source", scene)), "capture": str(Path(capture).resolve()),
-            "parameters": list(names), "settings": {k: asdict(settings)[k] for k in keep}}
+    # Only the settings the likelihood depends on: a longer chain or more walkers' worth of
+    # checks continues the same run.
+    return run_identity(scene, capture, names, settings, keep=("spp", "downsample", "clamp", "seed"))
 
 
 def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
@@ -270,10 +272,8 @@ def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray
             mode = np.asarray(g["mode"]) if "mode" in g else None
     except (OSError, KeyError, json.JSONDecodeError) as exc:
         raise InputError(path, _GROUP, f"not an abs chain file ({exc}); delete it to start over") from None
-    for key, value in identity.items():
-        if saved.get(key) != value:
-            raise InputError(path, f"{_GROUP}.{key}", f"chain was sampled with {saved.get(key)!r}, "
-                             f"this run has {value!r}; use another --out folder or drop --resume")
+    check_identity(path, _GROUP, saved, identity, "chain was sampled",
+                   "use another --out folder or drop --resume")
     return noise, start, offset, mode
 
 
@@ -349,7 +349,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     resume : bool
         Continue the chain in ``chain_path`` (refused if it belongs to another problem).
     pool : object with ``map``, optional
-        From :func:`abs.sampling.pools.evaluation_pool`.
+        From :func:`abs.pools.worker_pool`.
     on_step : callable, optional
         Called with an :class:`EnsembleProgress` after every step.
     on_stage : callable, optional

@@ -10,18 +10,17 @@ scanner's estimate (:mod:`~abs.studies.sl_noise`), collects BRDF samples
 Lambertian fit to the same samples, a baseline the basis must beat.
 
 Tasks and results are plain dicts (JSON-ready, picklable), so they run in local processes or on a
-Dask cluster (:mod:`abs.studies.parallel`) and are checkpointed one file each by the caller.
+Dask cluster (:mod:`abs.pools`) and are checkpointed one file each by the caller.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from abs.brdf.measured import STUDY_MATERIALS
+from abs.runs.identity import digest
 from abs.studies.sl_noise import NOISE_TYPES
 
 __all__ = [
@@ -121,7 +120,7 @@ def study_tasks(config: StudyConfig) -> list[dict]:
 
 def task_digest(task: dict) -> str:
     """Hash of everything a task's result depends on (resume refuses a stale result)."""
-    return hashlib.sha256(json.dumps(task, sort_keys=True).encode()).hexdigest()[:16]
+    return digest(task)
 
 
 def in_plane_profile(table: np.ndarray, incidence_deg: float = PROFILE_INCIDENCE_DEG,

@@ -19,8 +19,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from abs.io.fit_files import write_json
-from abs.studies.parallel import map_tasks
+from abs.pools import worker_pool
+from abs.runs.files import write_json
 from abs.studies.sl_paper import default_paper_tables_path, read_paper_tables
 from abs.studies.sl_rig import default_rig
 from abs.studies.sl_scanner import (
@@ -89,12 +89,13 @@ def run_study(config: StudyConfig, out: str | Path, workers: int = 1, scheduler:
     start = time.perf_counter()
     results = _load_done(results_dir, tasks)
     todo = [t for t in tasks if task_id(t) not in results]
-    for finished, (task, result) in enumerate(map_tasks(run_task, todo, workers=workers,
-                                                        scheduler=scheduler), start=1):
-        write_json(results_dir / f"{task_id(task)}.json", result)
-        results[result["id"]] = result
-        if on_result is not None:
-            on_result(result["id"], finished, len(todo))
+    if todo:  # a finished study reruns without starting workers or reaching a scheduler
+        with worker_pool(workers, scheduler) as pool:
+            for finished, (task, result) in enumerate(pool.as_completed(run_task, todo), start=1):
+                write_json(results_dir / f"{task_id(task)}.json", result)
+                results[result["id"]] = result
+                if on_result is not None:
+                    on_result(result["id"], finished, len(todo))
     keyed = [{**t, "id": task_id(t)} for t in tasks]
     summary = {
         "config": config.to_dict(),

@@ -155,15 +155,15 @@ def main(argv=None) -> int:
         parts = [json.loads(f.read_text()) for f in args.merge]
         rows = [r for part in parts for r in part["rows"]]
         summary, markdown = summarise(rows, parts[0]["config"])
-        from abs.io.fit_files import write_json
+        from abs.runs.files import write_json
 
         write_json(args.results, {"config": parts[0]["config"], "summary": summary, "rows": rows})
         args.results.with_suffix(".md").write_text(markdown)
         print(markdown)
         return 0
 
-    from abs.io.fit_files import write_json
     from abs.render.variant import set_variant
+    from abs.runs.files import write_json
 
     set_variant()
     names = QUICK if args.cases == "quick" else ([c.name for c in CASES] if args.cases == "all"

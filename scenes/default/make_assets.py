@@ -30,7 +30,8 @@ HERE = Path(__file__).resolve().parent
 if str(HERE.parents[1]) not in sys.path:  # run as a script: make the repository's abs importable
     sys.path.insert(0, str(HERE.parents[1]))
 
-from abs.io.images import linear_to_srgb, write_exr  # noqa: E402
+from abs.colour.srgb import linear_to_srgb  # noqa: E402
+from abs.io.images import write_exr  # noqa: E402
 
 # --- Scene geometry (metres) ------------------------------------------------------------------
 SPHERE_RADIUS = 0.04

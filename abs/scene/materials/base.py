@@ -55,7 +55,7 @@ class ParameterSpec:
     typical_step : float or None
         The size of change over which the image stays close to linear in the field (its unit):
         a fit's first steps are about this large. ``None``: from the value and bounds
-        (:func:`abs.fitting.parameters.typical_step`). An IOR needs it: the image of a
+        (:func:`abs.model.parameters.typical_step`). An IOR needs it: the image of a
         checkerboard through a glass sphere is linear in the IOR over about 0.01 only, while the
         default (the distance from the bound, 0.5) let the first steps jump to IOR 2.
     null : float or None

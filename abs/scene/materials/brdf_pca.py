@@ -1,6 +1,7 @@
 """``brdf_pca``: a measured-BRDF-like material given by coefficients over a PCA basis of measured
 BRDFs (Nielsen et al. 2015). The table ``unmap(mean + components^T c)`` is rebuilt, differentiably,
-whenever ``coefficients`` change, and rendered by the ``abs_tabulated`` BSDF."""
+whenever ``coefficients`` change (by :mod:`abs.render.brdf_tables`, in the renderer bridge above
+this package), and rendered by the ``abs_tabulated`` BSDF."""
 
 from __future__ import annotations
 
@@ -49,8 +50,3 @@ class BrdfPca(Material):
     def parameters(self) -> dict[str, ParameterSpec]:
         return {"coefficients": ParameterSpec("coefficients", self.coefficients.size, "1",
                                               -np.inf, np.inf, None)}
-
-    def apply(self, field: str, value, mitsuba_params) -> None:
-        from abs.brdf.basis import table_from_coefficients
-
-        mitsuba_params[f"{self.name}.table"] = table_from_coefficients(self.basis, value)
