@@ -91,6 +91,11 @@ def mitsuba_photograph(compiled, camera, spp: int, seed: int) -> np.ndarray:
     return np.array(mi.render(mi.load_dict(d, optimize=False), spp=spp, seed=seed), np.float32)
 
 
+def _truth(case: Case) -> dict:
+    return {"ior": case.ior, "absorption_per_m": list(case.absorption_per_m), "env_scale": case.env_scale,
+            "mesh": case.mesh}
+
+
 def run_case(case: Case, work: Path, args) -> dict:
     from abs.fitting import FitSettings, fit
     from abs.scene import load_scene
@@ -101,11 +106,21 @@ def run_case(case: Case, work: Path, args) -> dict:
     (folder / "truth.toml").write_text(_scene_text(case.mesh, [case.ior] * 3, case.absorption_per_m,
                                                    case.env_scale))
     (folder / "scene.toml").write_text(_scene_text(case.mesh, [1.5] * 3, (1.0, 1.0, 1.0), 1.0))
-    simulate_capture(load_scene(folder / "truth.toml"), folder / "capture", n_cameras=args.views,
-                     width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
-                     read_noise=0.003, seed=1, render=mitsuba_photograph)
+    shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp}
+    made = folder / "capture" / "benchmark.json"
+    if not made.exists() or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}:
+        simulate_capture(load_scene(folder / "truth.toml"), folder / "capture", n_cameras=args.views,
+                         width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
+                         read_noise=0.003, seed=1, render=mitsuba_photograph)
+        made.write_text(json.dumps({**shape, "truth": _truth(case)}))
+    settings = FitSettings(**json.loads(args.settings))
     start = time.perf_counter()
-    result = fit(folder / "scene.toml", folder / "capture", FITTED, FitSettings(),
+
+    def progress(state):
+        print(f"  {case.name}: iteration {state.iteration}, RMSE {state.history[-1]['loss']:.4g}, "
+              f"{time.perf_counter() - start:.0f} s", flush=True)
+
+    result = fit(folder / "scene.toml", folder / "capture", FITTED, settings, on_iteration=progress,
                  truth={"glass.absorption": list(case.absorption_per_m), "glass.ior": [case.ior] * 3,
                         "environment.scale": [case.env_scale]})
     summary = result.summary()
@@ -122,8 +137,9 @@ def run_case(case: Case, work: Path, args) -> dict:
     return {"case": case.name, "mesh": case.mesh, "parameters": rows, "checks": summary["checks"],
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
-            "settings": {"width": args.width, "height": args.height, "views": args.views,
-                         "photo_spp": args.photo_spp, "fit": "abs.fit defaults"}}
+            "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
+                      for h in result.history],
+            "settings": {**shape, "fit": json.loads(args.settings) or "abs.fit defaults"}}
 
 
 def table(results: list[dict]) -> list[str]:
@@ -152,6 +168,8 @@ def main() -> None:
     parser.add_argument("--photo-spp", type=int, default=512)
     parser.add_argument("--work", type=Path, default=ROOT / "out/glass-fit")
     parser.add_argument("--results", type=Path, default=RESULTS)
+    parser.add_argument("--settings", default="{}",
+                        help="FitSettings fields as JSON (default: abs.fit's defaults, the suite's claim)")
     args = parser.parse_args()
     chosen = CASES if args.cases == "all" else [c for c in CASES if c.name in args.cases.split(",")]
     done = json.loads(args.results.read_text()) if args.results.exists() else []
