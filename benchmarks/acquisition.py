@@ -22,7 +22,7 @@ Parts (each resumable: a part already in the JSON is skipped unless ``--force``)
   noise, the demosaiced merge (written as 16-bit TIFFs, read by ``abs capture build``'s loader)
   against the bilinearly demosaiced truth, and an 8-bit gamma-response (JPEG-like) bracket merged
   with Debevec's recovered response.
-- ``end_to_end``: the default scene (scenes/default/scene.toml) seen by 3 cameras (96x72, one
+- ``end_to_end``: the default scene (scenes/default/scene.toml) seen by 3 cameras (128x96, one
   holdout) with lens distortion; raw RGGB brackets (7 exposures) rendered through the distorted
   camera, ``abs capture build`` with dark frames, then ``abs.fit`` of ``environment.scale`` and
   ``glass.absorption``, against the same fit on an ``abs simulate`` capture of the same views.
@@ -492,8 +492,8 @@ def part_synthetic_hdr() -> dict:
 # End to end: raw brackets of the default scene -> capture build -> fit
 # ---------------------------------------------------------------------------------------------
 
-E2E = {"width": 96, "height": 72, "views": 3, "truth_spp": 512, "fit_spp": 16,
-       "max_iterations": 10, "refinement_steps": 4, "supersample": 2,
+E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
+       "max_iterations": 12, "refinement_steps": 6, "supersample": 2,
        "distortion": [-0.12, 0.02, 0.0005, -0.0005, 0.0], "gain_dn_per_s": 2.0e5,
        "exposures_s": (0.001 * 4.0 ** np.arange(7)).tolist(), "start_scale_factor": 1.3,
        "start_absorption": [2.5, 2.5, 2.5]}
@@ -574,13 +574,20 @@ def part_end_to_end() -> dict:
             result = fit(scene_path, folder, settings=settings, initial=initial)
             scale = float(np.ravel(result.values["environment.scale"])[0]) / unit
             absorption = np.ravel(result.values["glass.absorption"])
+            stderr = result.vector.split(result.uncertainty.stderr)
+            scale_se = float(np.ravel(stderr["environment.scale"])[0]) / unit
+            absorption_se = np.ravel(stderr["glass.absorption"])
+            true_abs = np.array(truth["glass.absorption"])
+            holdout = result.metrics.get("holdout_rmse") or {}
             out[label] = {
-                "environment_scale": scale,
+                "environment_scale": scale, "environment_scale_stderr": scale_se,
                 "environment_scale_rel_error": scale / truth["environment.scale"] - 1,
                 "glass_absorption": absorption.tolist(),
-                "glass_absorption_rel_error": (absorption / np.array(truth["glass.absorption"])
-                                               - 1).tolist(),
-                "holdout_rmse": result.metrics.get("holdout_rmse"),
+                "glass_absorption_stderr": absorption_se.tolist(),
+                "glass_absorption_error": (absorption - true_abs).tolist(),
+                "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
+                "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
+                "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
                 "seconds": time.perf_counter() - t1}
     out["seconds"] = time.perf_counter() - t0
     return out
@@ -668,10 +675,17 @@ def write_markdown(results: dict, path: Path) -> None:
         for label in ("simulate", "built_from_raw"):
             x = e.get(label)
             if x:
-                lines.append(f"| end to end, default scene, 3 views 96x72 | {label}: env. scale, "
-                             f"absorption errors | {100 * x['environment_scale_rel_error']:+.2f} %, "
-                             + ", ".join(f"{100 * v:+.1f} %" for v in x["glass_absorption_rel_error"])
-                             + " | |")
+                cfg = e["config"]
+                lines.append(
+                    f"| end to end, default scene, {cfg['views']} views {cfg['width']}x"
+                    f"{cfg['height']} | {label}: environment.scale error; glass.absorption error "
+                    f"(1/m, truth {e['truth']['glass.absorption']}) | "
+                    f"{100 * x['environment_scale_rel_error']:+.2f} % "
+                    f"(± {100 * x['environment_scale_stderr']:.2f} %); "
+                    + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
+                                zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
+                    + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
+                    f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f} |")
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

@@ -133,3 +133,25 @@ def test_white_level_of_a_12_bit_sensor_in_16_bit_files(tmp_path: Path):
     (tmp_path / "build.json").write_text(json.dumps(spec))
     with pytest.raises(InputError, match=r"build.json: white_level: expected a positive number"):
         build_capture(tmp_path / "build.json", tmp_path / "c")
+
+
+def test_build_undistorts_and_writes_masks(tmp_path: Path):
+    build_file, _ = _setup(tmp_path)
+    spec = json.loads(build_file.read_text())
+    mask = np.zeros((48, 64), np.uint8)
+    mask[10:30, 20:44] = 255  # drawn on the original (distorted) frames
+    cv2.imwrite(str(tmp_path / "v0_mask.png"), mask)
+    spec["views"][0]["mask"] = "v0_mask.png"
+    build_file.write_text(json.dumps(spec))
+    build_capture(build_file, tmp_path / "capture")
+    view = load_capture(tmp_path / "capture").view("v0")
+    got = view.read_mask()
+    cam = CameraModel(64, 48, K, DIST)
+    from abs.acquisition.undistort import undistort_mask
+    np.testing.assert_array_equal(got, undistort_mask(mask > 0, cam, pinhole_K(cam)))
+    # Barrel distortion removed: the rectangle's undistorted area differs but its centre stays put.
+    assert abs(got.sum() / (mask > 0).sum() - 1) < 0.2
+    assert load_capture(tmp_path / "capture").view("v1").mask is None
+    cv2.imwrite(str(tmp_path / "v0_mask.png"), np.zeros((40, 64), np.uint8))
+    with pytest.raises(InputError, match="v0_mask.png"):
+        build_capture(build_file, tmp_path / "capture2")

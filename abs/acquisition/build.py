@@ -5,14 +5,18 @@ A build file (JSON, data only) lists the views::
     {"cameras": "calibration.json", "cfa_pattern": "RGGB", "white_level": 4095,
      "views": [{"name": "v0", "camera": "left",
                 "frames": ["v0_001ms.tif", "v0_002ms.tif"], "exposures_s": [0.001, 0.002],
-                "darks": ["dark_001ms.tif", "dark_002ms.tif"], "holdout": false}]}
+                "darks": ["dark_001ms.tif", "dark_002ms.tif"], "holdout": false,
+                "mask": "v0_mask.png"}]}
 
 Paths are relative to the build file. Each frame is a raw mosaic (see :mod:`.raw`; demosaiced
 bilinearly with the file's CFA pattern, else ``cfa_pattern``) or a linear EXR. ``white_level``
 (optional, data numbers) replaces the file's own saturation level: a 12- or 14-bit sensor stored
 in 16-bit TIFFs saturates at 4095 or 16383, not at the container's 65535. A view's frames
 are merged (:func:`merge_brackets`) into data numbers per second, undistorted to the pinhole
-camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture`.
+camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture`. ``mask``
+(optional): an image of the photographs' size, drawn on the *original* (distorted) frames,
+nonzero where pixels are compared; it is undistorted with the image (nearest neighbour, and
+pixels that fall outside the original frame are left out) and written as the view's mask.
 """
 
 from __future__ import annotations
@@ -29,14 +33,14 @@ from abs.acquisition.camera_file import read_camera_file
 from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
 from abs.acquisition.hdr import MergedHDR, merge_brackets
 from abs.acquisition.raw import read_raw
-from abs.acquisition.undistort import pinhole_K, undistort_image
+from abs.acquisition.undistort import pinhole_K, undistort_image, undistort_mask
 from abs.errors import InputError
 from abs.io.capture import Capture, save_capture
-from abs.io.images import read_image
+from abs.io.images import read_image, read_mask
 
 __all__ = ["build_capture", "load_frame"]
 
-_VIEW_KEYS = {"name", "camera", "frames", "exposures_s", "darks", "holdout"}
+_VIEW_KEYS = {"name", "camera", "frames", "exposures_s", "darks", "holdout", "mask"}
 
 
 def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
@@ -127,7 +131,7 @@ def build_capture(build_file: str | Path, out: str | Path,
                                     or not white_level > 0):
         raise InputError(source, "white_level", f"expected a positive number of data numbers, "
                                                 f"got {white_level!r}")
-    views, images, merges = [], {}, {}
+    views, images, masks, merges = [], {}, {}, {}
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
         if not isinstance(entry, dict):
@@ -152,9 +156,12 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                         f"{cam.height}: mixed image sizes")
         K_new = pinhole_K(cam)
         images[entry["name"]] = undistort_image(merged.radiance, cam, K_new)
+        if entry.get("mask") is not None:
+            mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
+            masks[entry["name"]] = undistort_mask(mask, cam, K_new)
         views.append({"name": entry["name"], "K": K_new, "R": cam.R, "t": cam.t,
                       "holdout": bool(entry.get("holdout", False))})
         merges[entry["name"]] = merged
         if progress is not None:
             progress(1)
-    return save_capture(out, views, images), merges
+    return save_capture(out, views, images, masks or None), merges
