@@ -496,7 +496,7 @@ E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
        "max_iterations": 12, "refinement_steps": 6, "supersample": 2,
        "distortion": [-0.12, 0.02, 0.0005, -0.0005, 0.0], "gain_dn_per_s": 2.0e5,
        "exposures_s": (0.001 * 4.0 ** np.arange(7)).tolist(), "start_scale_factor": 1.3,
-       "start_absorption": [2.5, 2.5, 2.5]}
+       "start_absorption": [2.5, 2.5, 2.5], "downsamples": [1, 2]}
 
 
 def part_end_to_end() -> dict:
@@ -521,8 +521,6 @@ def part_end_to_end() -> dict:
     rng = np.random.default_rng(3)
     white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
     t_exp = np.array(cfg["exposures_s"])
-    settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
-                           refinement_steps=cfg["refinement_steps"])
     out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -566,9 +564,14 @@ def part_end_to_end() -> dict:
         out["saturated_everywhere"] = int(sum(m.saturated_everywhere.sum() for m in merges.values()))
         # Fits from the same start (environment.scale in the capture's units: 1 for the
         # simulated capture, the sensor gain in DN/s for the built one).
-        for label, folder, unit in (("simulate", tmp / "simulated", 1.0),
-                                    ("built_from_raw", tmp / "built", gain)):
+        runs = [(f"{label}{'' if ds == 1 else f'_downsample{ds}'}", folder, unit, ds)
+                for ds in cfg["downsamples"]
+                for label, folder, unit in (("simulate", tmp / "simulated", 1.0),
+                                            ("built_from_raw", tmp / "built", gain))]
+        for label, folder, unit, ds in runs:
             t1 = time.perf_counter()
+            settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
+                                   refinement_steps=cfg["refinement_steps"], downsample=ds)
             initial = {"environment.scale": [truth["environment.scale"] * unit * cfg["start_scale_factor"]],
                        "glass.absorption": cfg["start_absorption"]}
             result = fit(scene_path, folder, settings=settings, initial=initial)
@@ -587,6 +590,7 @@ def part_end_to_end() -> dict:
                 "glass_absorption_error": (absorption - true_abs).tolist(),
                 "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
                 "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
+                "downsample": ds,
                 "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
                 "seconds": time.perf_counter() - t1}
     out["seconds"] = time.perf_counter() - t0
@@ -672,7 +676,8 @@ def write_markdown(results: dict, path: Path) -> None:
                   f"{h['jpeg_like']['log_error_p95_abs']:.3f} | |"]
     e = parts.get("end_to_end")
     if e:
-        for label in ("simulate", "built_from_raw"):
+        for label in ("simulate", "built_from_raw", "simulate_downsample2",
+                      "built_from_raw_downsample2"):
             x = e.get(label)
             if x:
                 cfg = e["config"]
