@@ -717,7 +717,7 @@ def write_markdown(results: dict, path: Path) -> None:
                   f"| | demosaiced (builder's loader) vs demosaiced truth | median "
                   f"{100 * h['demosaiced']['relative_error_median_abs']:.2f} %, bias "
                   f"{100 * h['demosaiced']['relative_bias']:+.3f} % | |",
-                  f"| | 8-bit gamma bracket, Debevec | median |log error| "
+                  f"| | 8-bit gamma bracket, Debevec: absolute log error | median "
                   f"{h['jpeg_like']['log_error_median_abs']:.3f}, p95 "
                   f"{h['jpeg_like']['log_error_p95_abs']:.3f} | |"]
     e = parts.get("end_to_end")
