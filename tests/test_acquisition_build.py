@@ -103,3 +103,55 @@ def test_cli_build_and_calibrate_errors(tmp_path: Path, capsys):
     assert main(["calibrate", "intrinsics", str(blank), "--board", "checkerboard:9x6:25mm",
                  "--out", str(tmp_path / "c.json")]) == 2
     assert "not found in any of the 1 images" in capsys.readouterr().err
+
+
+def test_white_level_of_a_12_bit_sensor_in_16_bit_files(tmp_path: Path):
+    """12-bit data in 16-bit TIFFs saturate at 4095, which only ``white_level`` can say: without
+    it the clipped long frame is taken as valid and the merge is biased low."""
+    write_camera_file(tmp_path / "cams.json", {"cam": CameraModel(64, 48, K, np.zeros(5))})
+    radiance = np.full((48, 64, 3), 1.0e5)  # DN/s: 100 DN at 1 ms, clipped at 100 ms
+    t = np.array([0.001, 0.01, 0.1])
+    masks = cfa_masks((48, 64), "RGGB")
+    names = []
+    for ti in t:
+        mosaic = np.minimum(np.sum(radiance * ti * masks, axis=-1) + 100.0, 4095.0)
+        names.append(f"f{int(ti * 1000)}.tif")
+        cv2.imwrite(str(tmp_path / names[-1]), np.round(mosaic).astype(np.uint16))
+    cv2.imwrite(str(tmp_path / "dark.tif"), np.full((48, 64), 100, np.uint16))
+    spec = {"cameras": "cams.json", "cfa_pattern": "RGGB",
+            "views": [{"name": "v0", "camera": "cam", "frames": names, "exposures_s": t.tolist(),
+                       "darks": ["dark.tif"] * 3}]}
+    (tmp_path / "build.json").write_text(json.dumps(spec))
+    _, merges = build_capture(tmp_path / "build.json", tmp_path / "a")
+    inner = (slice(2, -2), slice(2, -2))
+    assert merges["v0"].radiance[inner].mean() < 0.5e5
+    spec["white_level"] = 4095
+    (tmp_path / "build.json").write_text(json.dumps(spec))
+    _, merges = build_capture(tmp_path / "build.json", tmp_path / "b")
+    np.testing.assert_allclose(merges["v0"].radiance[inner], 1.0e5, rtol=1e-3)
+    spec["white_level"] = "4095"
+    (tmp_path / "build.json").write_text(json.dumps(spec))
+    with pytest.raises(InputError, match=r"build.json: white_level: expected a positive number"):
+        build_capture(tmp_path / "build.json", tmp_path / "c")
+
+
+def test_build_undistorts_and_writes_masks(tmp_path: Path):
+    build_file, _ = _setup(tmp_path)
+    spec = json.loads(build_file.read_text())
+    mask = np.zeros((48, 64), np.uint8)
+    mask[10:30, 20:44] = 255  # drawn on the original (distorted) frames
+    cv2.imwrite(str(tmp_path / "v0_mask.png"), mask)
+    spec["views"][0]["mask"] = "v0_mask.png"
+    build_file.write_text(json.dumps(spec))
+    build_capture(build_file, tmp_path / "capture")
+    view = load_capture(tmp_path / "capture").view("v0")
+    got = view.read_mask()
+    cam = CameraModel(64, 48, K, DIST)
+    from abs.acquisition.undistort import undistort_mask
+    np.testing.assert_array_equal(got, undistort_mask(mask > 0, cam, pinhole_K(cam)))
+    # Barrel distortion removed: the rectangle's undistorted area differs but its centre stays put.
+    assert abs(got.sum() / (mask > 0).sum() - 1) < 0.2
+    assert load_capture(tmp_path / "capture").view("v1").mask is None
+    cv2.imwrite(str(tmp_path / "v0_mask.png"), np.zeros((40, 64), np.uint8))
+    with pytest.raises(InputError, match="v0_mask.png"):
+        build_capture(build_file, tmp_path / "capture2")

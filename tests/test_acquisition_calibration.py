@@ -196,3 +196,16 @@ def test_real_stereo_pairs_against_reference():
     R_ref = ref_extrinsics.getNode("R").mat()
     angle = np.degrees(np.linalg.norm(cv2.Rodrigues(st.R @ R_ref.T)[0]))
     assert angle < 1.0
+
+
+def test_stereo_images_of_different_sizes_refused(tmp_path: Path, capsys):
+    from abs.cli.main import main
+
+    H = np.array([[0.55, 0.08, 30.0], [-0.05, 0.5, 25.0], [0.0002, 0.0001, 1.0]])
+    cv2.imwrite(str(tmp_path / "left.png"), _board_image(H))
+    cv2.imwrite(str(tmp_path / "right.png"), _board_image(H, size=(320, 236)))
+    code = main(["calibrate", "stereo", "--left", str(tmp_path / "left.png"), "--right",
+                 str(tmp_path / "right.png"), "--board", "checkerboard:9x6:25mm",
+                 "--out", str(tmp_path / "cams.json")])
+    assert code == 2
+    assert "right.png: image size 320x236 differs from left's 320x240" in capsys.readouterr().err

@@ -204,3 +204,23 @@ def test_debevec_on_real_jpeg_bracket():
     assumed_srgb = _log_disagreement(frames, t, lambda f: srgb_to_linear(f / 255.0))
     # Measured: 2.6 % with the recovered response against 56 % assuming a plain sRGB curve.
     assert recovered < 0.05 and assumed_srgb > 0.3
+
+
+def test_mixed_frame_sizes_refused():
+    frames = [np.zeros((4, 4)), np.zeros((4, 5))]
+    with pytest.raises(InputError, match=r"frames\[1\]: mixed image sizes"):
+        merge_brackets(frames, [0.01, 0.02], 255.0)
+    with pytest.raises(InputError, match=r"darks\[1\]: mixed image sizes"):
+        merge_brackets([np.zeros((4, 4))] * 2, [0.01, 0.02], 255.0,
+                       darks=[np.zeros((4, 4)), np.zeros((3, 4))])
+
+
+def test_ldr_bracket_bad_inputs_refused():
+    from abs.acquisition.response import merge_ldr, recover_response
+
+    frames = [np.zeros((8, 8, 3), np.uint8)] * 3
+    with pytest.raises(InputError, match="must increase strictly"):
+        recover_response(frames, [0.1, 0.4, 0.2])
+    with pytest.raises(InputError, match=r"frames\[1\].*mixed image sizes"):
+        merge_ldr([frames[0], np.zeros((8, 6, 3), np.uint8)], [0.1, 0.2],
+                  np.ones((256, 3), np.float32))

@@ -89,10 +89,22 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
     t = check_exposures(exposures_s, source)
     if len(frames) != t.size:
         raise InputError(source, "frames", f"{len(frames)} frames for {t.size} exposure times")
+    shapes = [np.shape(f) for f in frames]
+    for i, shape in enumerate(shapes[1:], 1):
+        if shape != shapes[0]:
+            raise InputError(source, f"frames[{i}]", f"mixed image sizes: frame {i} is {shape}, "
+                                                     f"frame 0 is {shapes[0]}")
     stack = np.stack([np.asarray(f, np.float64) for f in frames])
     if darks is not None:
         if len(darks) != t.size:
             raise InputError(source, "darks", f"{len(darks)} dark frames for {t.size} exposures")
+        for i, d in enumerate(darks):
+            try:
+                np.broadcast_to(np.asarray(d), stack.shape[1:])
+            except ValueError:
+                raise InputError(source, f"darks[{i}]", f"mixed image sizes: dark frame {i} is "
+                                                        f"{np.shape(d)}, frames are "
+                                                        f"{stack.shape[1:]}") from None
         dark = np.stack([np.broadcast_to(np.asarray(d, np.float64), stack.shape[1:])
                          for d in darks])
     else:

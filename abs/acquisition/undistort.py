@@ -13,7 +13,7 @@ import numpy as np
 
 from abs.acquisition.camera_file import CameraModel
 
-__all__ = ["pinhole_K", "undistort_image"]
+__all__ = ["pinhole_K", "undistort_image", "undistort_mask"]
 
 
 def pinhole_K(camera: CameraModel, alpha: float = 0.0) -> np.ndarray:
@@ -40,3 +40,16 @@ def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray) -
                                              (camera.width, camera.height), cv2.CV_32FC1)
     return cv2.remap(np.asarray(image, np.float32), map1, map2, cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_CONSTANT)
+
+
+def undistort_mask(mask: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> np.ndarray:
+    """Resample a boolean ``(H, W)`` mask like :func:`undistort_image` (nearest neighbour); pixels
+    that come from outside the original frame are False."""
+    if mask.shape[:2] != (camera.height, camera.width):
+        raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, camera "
+                         f"{camera.width}x{camera.height}")
+    map1, map2 = cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
+                                             (camera.width, camera.height), cv2.CV_32FC1)
+    out = cv2.remap(np.asarray(mask, bool).astype(np.uint8), map1, map2, cv2.INTER_NEAREST,
+                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return out.astype(bool)

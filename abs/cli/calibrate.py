@@ -70,10 +70,10 @@ def _update_camera_file(path: Path, cameras: dict) -> None:
     write_camera_file(path, existing)
 
 
-def _intrinsics(paths: list[Path], board, label: str, drop_outliers: bool):
+def _intrinsics(paths: list[Path], board, label: str, drop_outliers: bool, det=None):
     from abs.acquisition.intrinsics import calibrate_intrinsics
 
-    det = _detect(paths, board, label)
+    det = _detect(paths, board, label) if det is None else det
     found = det.found
     names = [det.paths[i].name for i in found]
     calib = calibrate_intrinsics([det.corners[i] for i in found], board.object_points(),
@@ -153,11 +153,12 @@ def _run_stereo(args) -> int:
         raise InputError(None, "--right", f"{len(args.right)} images for {len(args.left)} in --left")
     board = parse_board(args.board, field="--board")
     n1, n2 = args.names
-    d1, c1 = _intrinsics(args.left, board, n1, False)
-    d2, c2 = _intrinsics(args.right, board, n2, False)
+    d1, d2 = _detect(args.left, board, n1), _detect(args.right, board, n2)
     if (d1.width, d1.height) != (d2.width, d2.height):
         raise InputError(args.right[0], "", f"image size {d2.width}x{d2.height} differs from "
-                                            f"{n1}'s {d1.width}x{d1.height}")
+                                            f"{n1}'s {d1.width}x{d1.height}: mixed image sizes")
+    d1, c1 = _intrinsics(args.left, board, n1, False, d1)
+    d2, c2 = _intrinsics(args.right, board, n2, False, d2)
     both = [i for i in range(len(args.left)) if d1.corners[i] is not None
             and d2.corners[i] is not None]
     held = both[len(both) - args.holdout:] if args.holdout else []
