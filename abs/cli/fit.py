@@ -35,10 +35,13 @@ def add_parser(sub) -> None:
                    help="Gauss-Newton steps on independent renders after Levenberg-Marquardt")
     p.add_argument("--learning-rate", type=float, default=0.05, help="Adam step (typical steps)")
     p.add_argument("--spp-schedule", default="", help="Adam: ITER:SPP,... e.g. 0:4,20:16")
-    p.add_argument("--downsample-schedule", default="", help="Adam: ITER:FACTOR,... e.g. 0:4,10:2,20:1")
+    p.add_argument("--downsample-schedule", default="", help="coarse to fine, Adam and LM: ITER:FACTOR,... e.g. 0:4,10:2,20:1")
     p.add_argument("--eval-spp", type=int, default=None,
                    help="samples per pixel of the before/after renders (default: the scene's)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tie", action="append", default=[], metavar="NAME",
+                   help="fit this per-channel parameter as one value for all channels "
+                        "(e.g. glass.ior when the photographs do not resolve dispersion); repeatable")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -74,7 +77,7 @@ def run(args) -> int:
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
-        seed=args.seed)
+        seed=args.seed, tie=tuple(args.tie))
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

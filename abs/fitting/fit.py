@@ -133,7 +133,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
-    model = build_model(scene, capture, parameters, initial)
+    model = build_model(scene, capture, parameters, initial, settings.tie)
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}

@@ -74,10 +74,9 @@ class Objective:
         s = self.settings
         return self.model.problem("train", s.downsample if factor is None else factor, s.clamp)
 
-    @property
-    def n_residuals(self) -> int:
+    def n_residuals(self, factor: int | None = None) -> int:
         """Length of :meth:`residuals`' ``r``: pixel residuals plus one row per prior."""
-        return self.problem().n_residuals + int(self.has_prior.sum())
+        return self.problem(factor).n_residuals + int(self.has_prior.sum())
 
     def _weighted_jacobian(self, J: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
         """``d(r / sigma) / dz``, with the priors' rows below."""
@@ -87,7 +86,8 @@ class Objective:
             return np.concatenate([J, np.diag(dtheta / self.prior_sd)[has_prior]])
         return J
 
-    def residuals(self, z: np.ndarray, seed: int, jacobian_seed: int | None = None):
+    def residuals(self, z: np.ndarray, seed: int, jacobian_seed: int | None = None,
+                  factor: int | None = None):
         """Weighted residuals at ``z`` and their Jacobian w.r.t. ``z``.
 
         Parameters
@@ -97,6 +97,9 @@ class Objective:
             Seed of the renders of ``r``.
         jacobian_seed : int, optional
             Seed of independent renders for ``J`` (default: the same renders as ``r``).
+        factor : int, optional
+            Compare at this downsampling factor instead of the settings' ``downsample`` (a
+            coarse stage of Levenberg-Marquardt).
 
         Returns
         -------
@@ -107,7 +110,7 @@ class Objective:
         """
         vector, s = self.vector, self.settings
         theta, dtheta = vector.to_physical(z), vector.derivative(z)
-        r, J = self.problem().residuals(theta, s.spp, seed, jacobian=True, jacobian_seed=jacobian_seed)
+        r, J = self.problem(factor).residuals(theta, s.spp, seed, jacobian=True, jacobian_seed=jacobian_seed)
         loss = float(np.sqrt(np.mean(r ** 2)))
         r = r / self.sigma
         if self.has_prior.any():

@@ -52,7 +52,9 @@ class FitSettings:
     learning_rate : float
         Adam's step in the unconstrained coordinates (about ``learning_rate`` typical steps).
     spp_schedule, downsample_schedule : tuple of (iteration, value)
-        Adam's coarse-to-fine schedules, e.g. ``((0, 4), (20, 16))``.
+        Coarse-to-fine schedules, e.g. ``((0, 4), (20, 16))``: Adam's spp and resolution;
+        Levenberg-Marquardt's resolution stages (``lm_stages``; its refinement compares at
+        ``downsample``).
     eval_spp : int or None
         Samples per pixel of the before/after renders of all views (default: the scene's).
     rtol, atol : float
@@ -62,6 +64,10 @@ class FitSettings:
         that Monte-Carlo noise puts into a least-squares fit of one noisy render; 0: none).
     seed : int
         Base seed of all renders.
+    tie : tuple of str
+        Per-channel parameters fitted as one value for all channels (``("glass.ior",)``: an IOR
+        whose dispersion the photographs do not resolve; three noisy channels would each be
+        barely constrained).
     """
 
     method: str = "auto"
@@ -77,6 +83,7 @@ class FitSettings:
     atol: float = 1e-6
     refinement_steps: int = 4
     seed: int = 0
+    tie: tuple[str, ...] = ()
 
     def __post_init__(self):
         from abs.fitting.optimisers import names

@@ -93,7 +93,7 @@ class ForwardModel:
 
 
 def build_model(scene, capture, parameters: Sequence[str] | None = None,
-                initial: Mapping[str, object] | None = None) -> ForwardModel:
+                initial: Mapping[str, object] | None = None, tied: Sequence[str] = ()) -> ForwardModel:
     """Load, compile and check a scene and capture, and lay out the parameters that vary.
 
     Parameters
@@ -109,6 +109,9 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
         Starting values by parameter name (the parameters' units), instead of the scene's. They
         are written into the compiled scene, and the vector is laid out from the values it then
         holds.
+    tied : sequence of str, optional
+        Per-channel parameters to fit as one value for all channels (see
+        :class:`~abs.model.parameters.ParameterVector`).
 
     Returns
     -------
@@ -128,5 +131,9 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
             compiled.set(name, np.asarray(value, np.float64))
         except ValueError as exc:
             raise InputError(None, f"initial.{name}", str(exc)) from None
-    vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names})
+    try:
+        vector = ParameterVector.build(compiled.specs, names, {n: compiled.get(n) for n in names},
+                                       tuple(tied))
+    except ValueError as exc:
+        raise InputError(None, "tie", str(exc)) from None
     return ForwardModel(scene, compiled, capture, vector)

@@ -72,6 +72,11 @@ class ParameterVector:
     gain : ndarray
         ``k`` of the sigmoid of scalars bounded on both sides (1 where the spec gives no
         ``typical_step``, so that existing fits keep their conditioning).
+    tied : tuple of str
+        Per-channel parameters fitted as one value for every channel (one scalar here, expanded
+        by :meth:`split` and :meth:`tangents`): an IOR where the data do not resolve dispersion.
+    full_sizes : tuple of int
+        Each parameter's size in the scene (``sizes`` differs only for tied parameters).
     """
 
     names: tuple[str, ...]
@@ -82,14 +87,27 @@ class ParameterVector:
     step: np.ndarray
     units: tuple[str, ...]
     gain: np.ndarray | None = None
+    tied: tuple[str, ...] = ()
+    full_sizes: tuple[int, ...] | None = None
 
     @classmethod
-    def build(cls, specs: dict[str, Parameter], names, initial: dict[str, np.ndarray]) -> "ParameterVector":
-        """Lay out ``names`` (in order) from their specs and current values."""
+    def build(cls, specs: dict[str, Parameter], names, initial: dict[str, np.ndarray],
+              tied=()) -> "ParameterVector":
+        """Lay out ``names`` (in order) from their specs and current values; the names in
+        ``tied`` (per-channel parameters) take one scalar, starting at their channels' mean."""
+        unknown = [n for n in tied if n not in names]
+        if unknown:
+            raise ValueError(f"tied {unknown} are not among the fitted parameters {list(names)}")
+        full_sizes = []
         sizes, lower, upper, start, step, units, gain = [], [], [], [], [], [], []
         for name in names:
             spec = specs[name]
             value = np.asarray(initial[name], np.float64).ravel()
+            full_sizes.append(len(value))
+            if name in tied:
+                if len(value) < 2:
+                    raise ValueError(f"{name} has one value: there is nothing to tie")
+                value = np.array([value.mean()])
             sizes.append(len(value))
             lo = np.full(len(value), spec.lower)
             hi = np.full(len(value), spec.upper)
@@ -105,7 +123,7 @@ class ParameterVector:
             units.append(spec.unit); gain.append(k)
         cat = np.concatenate
         return cls(tuple(names), tuple(sizes), cat(lower), cat(upper), cat(start), cat(step),
-                   tuple(units), cat(gain))
+                   tuple(units), cat(gain), tuple(tied), tuple(full_sizes))
 
     @property
     def size(self) -> int:
@@ -119,13 +137,27 @@ class ParameterVector:
         return out
 
     def split(self, theta: np.ndarray) -> dict[str, np.ndarray]:
-        """Physical vector -> ``{name: values}``."""
-        return {name: np.asarray(theta[s], np.float64) for name, s in self.slices().items()}
+        """Physical vector -> ``{name: values}``, each at its size in the scene (a tied
+        parameter's one value repeated in every channel)."""
+        return {name: self._expand(name, np.asarray(theta[s], np.float64))
+                for name, s in self.slices().items()}
+
+    def tangents(self, tangent: np.ndarray, names=None) -> dict[str, np.ndarray]:
+        """A direction over the vector -> ``{name: tangent}`` at the scene's sizes, for
+        :meth:`abs.render.CompiledScene.render_forward` (a tied parameter moves every channel)."""
+        return {name: self._expand(name, np.asarray(tangent[s], np.float64))
+                for name, s in self.slices().items() if names is None or name in names}
+
+    def _expand(self, name: str, value: np.ndarray) -> np.ndarray:
+        if name not in self.tied:
+            return value
+        return np.repeat(value, self.full_sizes[self.names.index(name)])
 
     def labels(self) -> list[str]:
-        """One label per scalar: ``glass.absorption[0]``, ... (no index for single scalars)."""
-        return [name if n == 1 else f"{name}[{i}]" for name, n in zip(self.names, self.sizes)
-                for i in range(n)]
+        """One label per scalar: ``glass.absorption[0]``, ``glass.ior (tied)``, ... (no index
+        for single scalars)."""
+        return [(f"{name} (tied)" if name in self.tied else name) if n == 1 else f"{name}[{i}]"
+                for name, n in zip(self.names, self.sizes) for i in range(n)]
 
     # ----------------------------------------------------------- transforms
     @property

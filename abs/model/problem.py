@@ -180,13 +180,12 @@ class FitProblem:
         cam, p = obs.camera, self.vector.size
         self.set_values(theta)
         image, jac = None, np.zeros((cam.height, cam.width, 3, p))
-        slices = self.vector.slices()
         for tangent, columns in self.column_passes():
             # Every pass renders with the same seed (the same samples), and every fitted
             # parameter is given a tangent (zero where not wanted), so that every column is
             # rendered alike (e.g. dispersive glass splits its paths in each).
             rendered, derivative = self.compiled.render_forward(
-                cam, {name: tangent[s] for name, s in slices.items()}, spp=spp, seed=seed,
+                cam, self.vector.tangents(tangent), spp=spp, seed=seed,
                 max_depth=self.max_depth)
             self.counter.add(cam, spp)
             if image is None:
@@ -227,10 +226,11 @@ class FitProblem:
                                                      max_depth=self.max_depth)
                 self.counter.add(cam, spp)
                 for name in replayed:
-                    grad[slices[name]] += g[name]
+                    # A tied parameter's one scalar moves every channel: the channels' sum.
+                    grad[slices[name]] += (np.sum(g[name]) if name in self.vector.tied else g[name])
             for tangent, columns in self.column_passes(moving):
                 _, derivative = self.compiled.render_forward(
-                    cam, {n: tangent[slices[n]] for n in moving}, spp=spp, seed=view_seed,
+                    cam, self.vector.tangents(tangent, moving), spp=spp, seed=view_seed,
                     max_depth=self.max_depth)
                 self.counter.add(cam, spp)
                 derivative = derivative.numpy() * residual

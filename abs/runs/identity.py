@@ -31,11 +31,18 @@ def _capture_folder(capture) -> str:
     return str(Path(folder).resolve())
 
 
+_ADDED_LATER = ("tie",)
+
+
 def _settings(settings, keep: Iterable[str] | None, drop: Iterable[str]) -> dict:
     # Through JSON, so tuples compare equal to the lists a saved identity reads back as.
     values = json.loads(json.dumps(asdict(settings)))
+    # Settings added after runs were saved enter only when set, so those runs still resume.
+    for name in _ADDED_LATER:
+        if name in values and not values[name]:
+            del values[name]
     if keep is not None:
-        values = {k: values[k] for k in keep}
+        values = {k: values[k] for k in keep if k in values}
     return {k: v for k, v in values.items() if k not in set(drop)}
 
 

@@ -43,7 +43,8 @@ class RefinementState:
     points : tuple of ndarray
         The points ``z`` stepped to (unconstrained, typical steps), in order.
     clipped : tuple of bool
-        Per point: reached by a step clipped to the trust radius (still travelling).
+        Per point: reached while still travelling (a step clipped to the trust radius, or a
+        coordinate whose steps have not yet turned back).
     radius : ndarray or None
         The trust radius of every coordinate (typical steps); ``None`` before the first step.
     step : ndarray or None
@@ -103,7 +104,8 @@ class LevenbergMarquardt(Optimiser):
     """Levenberg-Marquardt on one fixed-seed render, then ``refinement_steps`` Gauss-Newton
     steps on fresh, independent renders (see the module docstring).
 
-    Uses the settings ``max_iterations``, ``rtol``, ``atol``, ``refinement_steps`` and ``seed``.
+    Uses the settings ``max_iterations``, ``rtol``, ``atol``, ``refinement_steps``, ``seed`` and
+    ``downsample_schedule`` (coarse-to-fine stages, :func:`lm_stages`).
     """
 
     State = LMState
@@ -113,9 +115,15 @@ class LevenbergMarquardt(Optimiser):
         solver = state.solver or LMState()
         # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
         if not solver.converged and not solver.refinement.points:
-            state = levenberg_marquardt(lambda z, iteration: objective.residuals(z, settings.seed),
-                                        state, objective.n_residuals, settings.max_iterations,
-                                        settings.rtol, settings.atol, on_iteration)
+            for factor, end in lm_stages(settings):
+                if state.iteration >= end:
+                    continue
+                state = levenberg_marquardt(
+                    lambda z, iteration, f=factor: objective.residuals(z, settings.seed, factor=f),
+                    state, objective.n_residuals(factor), end, settings.rtol, settings.atol,
+                    on_iteration)
+                if end < settings.max_iterations:
+                    state.solver = replace(state.solver, converged=None)  # a coarse stage
 
         def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
             base = settings.seed + 10_000 * iteration
@@ -130,6 +138,27 @@ class LevenbergMarquardt(Optimiser):
         if not refinement.points:
             return None
         return averaged_refinement_points(refinement.points, refinement.clipped)
+
+
+def lm_stages(settings) -> list[tuple[int, int]]:
+    """Levenberg-Marquardt's coarse-to-fine stages: ``(downsampling factor, last evaluation)``.
+
+    ``settings.downsample_schedule`` as for Adam: ``((0, 4), (8, 1))`` compares box-averaged
+    images (factor 4) from evaluation 0 and full images from evaluation 8, up to
+    ``max_iterations``; empty: one stage at ``settings.downsample``. The refinement that follows
+    compares at ``settings.downsample``. Why: a checkerboard seen through glass moves by more than
+    a square when the IOR is 0.02 off, and a Gauss-Newton model of the sharp image then predicts
+    nothing (its steps shrink to thousandths); averaged images stay near-linear over a wider
+    range, so coarse stages find the basin and the fine stage the minimum.
+    """
+    stages = sorted((start, factor) for start, factor in settings.downsample_schedule
+                    if start < settings.max_iterations)
+    if not stages:
+        return [(settings.downsample, settings.max_iterations)]
+    if stages[0][0] > 0:
+        stages.insert(0, (0, settings.downsample))
+    ends = [start for start, _ in stages[1:]] + [settings.max_iterations]
+    return [(factor, end) for (_, factor), end in zip(stages, ends)]
 
 
 def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple[np.ndarray, np.ndarray, float]],
@@ -198,10 +227,22 @@ def cross_curvature(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
     return (V * w) @ V.T
 
 
+def _turned_back(points: list) -> bool:
+    """Whether every coordinate's step has changed sign at least once along ``points``: until
+    then some coordinate is still travelling towards the solution (its steps all point one way,
+    as glass absorption's did for ten steps from a Levenberg-Marquardt start 5 per metre off),
+    and averaging its points would stop it short."""
+    if len(points) < 3:
+        return False
+    signs = np.sign(np.diff(np.asarray(points, np.float64), axis=0))
+    return bool(np.all(np.any(signs[1:] != signs[:-1], axis=0)))
+
+
 def averaged_refinement_points(points: list, travelling: list | None = None) -> np.ndarray:
     """The refinement points that are averaged: all but the first quarter (at least the first
-    one), which may still be travelling from the biased start, and none reached by a clipped step
-    (``travelling``, one flag per point); full Newton steps arrive within a step or two, after
+    one), which may still be travelling from the biased start, and none reached while travelling
+    (``travelling``, one flag per point: a clipped step, or a coordinate whose steps have not yet
+    turned back); full Newton steps usually arrive within a step or two, after
     which the points scatter independently around the unbiased solution. When every step was
     clipped, the last point alone."""
     points = np.asarray(points, np.float64)
@@ -270,10 +311,9 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
                               np.where(~same, np.maximum(max_step, radius / 2.0), radius))
         clipped_before = np.abs(step) > radius
         step = np.clip(step, -radius, radius)
-        clipped = bool(clipped_before.any())
         z = z + step
         points.append(z)
-        travelling.append(clipped)
+        travelling.append(bool(clipped_before.any()) or not _turned_back(points))
         previous = step
         solver = replace(solver, refinement=RefinementState(tuple(points), tuple(travelling),
                                                             radius.copy(), step))
