@@ -172,8 +172,16 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     problem = objective.problem()
     r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True,
                              jacobian_seed=settings.seed + 98)
-    uncertainty = laplace(r, J, np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None,
-                          jacobian2=problem.jacobian(theta, settings.spp, settings.seed + 97))
+    prior = np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None
+    J2 = problem.jacobian(theta, settings.spp, settings.seed + 97)
+    uncertainty = laplace(r, J, prior, jacobian2=J2)
+    # A curvature that one pair of noisy Jacobians leaves unresolved may be resolved by more
+    # pairs (an IOR's column through glass is noisy): up to three more before saying so.
+    more = []
+    while not uncertainty.identifiable.all() and len(more) < 3:
+        seed = settings.seed + 90 - 2 * len(more)
+        more.append((problem.jacobian(theta, settings.spp, seed), problem.jacobian(theta, settings.spp, seed - 1)))
+        uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more)
     points = optimiser.averaged_points(state)
     if points is not None:
         uncertainty = with_monte_carlo_error(uncertainty, np.array([vector.to_physical(p) for p in points]))

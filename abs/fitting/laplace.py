@@ -11,6 +11,7 @@ Correlations near +-1 mean the photographs cannot separate two parameters (they 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,7 +70,8 @@ def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray) -> 
 
 
 def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | None = None,
-            jacobian2: np.ndarray | None = None) -> LaplaceApproximation:
+            jacobian2: np.ndarray | None = None,
+            more_pairs: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> LaplaceApproximation:
     """Laplace approximation from residuals (M,) and their Jacobian (M, P) at the optimum.
 
     Parameters
@@ -81,11 +83,18 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
         ``(J1^T J2 + J2^T J1) / 2``, which is not inflated by the Jacobians' Monte-Carlo noise
         (``J1^T J1`` is, and would understate the standard errors). Directions whose curvature
         this estimate cannot resolve from zero come out unidentifiable.
+    more_pairs : sequence of (ndarray, ndarray), optional
+        Further independent Jacobian pairs at the same point: the cross curvature is averaged
+        over all pairs (a noisy column, an IOR seen through glass, can leave one pair's estimate
+        unresolved where the average is not).
     """
     m, p = jacobian.shape
     sigma2 = float(residuals @ residuals) / max(m - p, 1)
-    curvature = jacobian.T @ jacobian if jacobian2 is None else \
-        0.5 * (jacobian.T @ jacobian2 + jacobian2.T @ jacobian)
+    if jacobian2 is None:
+        curvature = jacobian.T @ jacobian
+    else:
+        pairs = [(jacobian, jacobian2), *more_pairs]
+        curvature = np.mean([0.5 * (a.T @ b + b.T @ a) for a, b in pairs], axis=0)
     precision = curvature / max(sigma2, 1e-300)
     if prior_sd is not None:
         precision = precision + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))
@@ -94,5 +103,8 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
     floor = max(float(w.max()), 1e-300) * 1e-10
     good = w > floor
     inv = (V[:, good] / w[good]) @ V[:, good].T
-    weak = np.abs(V[:, ~good]).max(axis=1) > 1e-3 if (~good).any() else np.zeros(p, bool)
+    # A scalar is unidentifiable when a tenth or more of it lies in unresolved directions; a
+    # small share (a scale's 1 % in an IOR's unresolved direction) leaves it resolved, its
+    # standard error from the resolved directions.
+    weak = np.sum(np.square(V[:, ~good]), axis=1) > 0.1 if (~good).any() else np.zeros(p, bool)
     return _from_covariance(inv, float(np.sqrt(sigma2)), ~weak)
