@@ -26,6 +26,9 @@ Parts (each resumable: a part already in the JSON is skipped unless ``--force``)
   holdout) with lens distortion; raw RGGB brackets (7 exposures) rendered through the distorted
   camera, ``abs capture build`` with dark frames, then ``abs.fit`` of ``environment.scale`` and
   ``glass.absorption``, against the same fit on an ``abs simulate`` capture of the same views.
+- ``end_to_end_superpixel``: ``end_to_end``'s raw brackets (the same data, regenerated) built
+  with ``demosaic = "superpixel"`` (a 64x48 capture) and fitted with the same settings; also
+  refits the bilinear build at downsample 2 to check that the part reproduces ``end_to_end``.
 
 Writes ``benchmarks/results/acquisition.json`` and ``benchmarks/results/acquisition.md``.
 
@@ -499,13 +502,84 @@ E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
        "start_absorption": [2.5, 2.5, 2.5], "downsamples": [1, 2]}
 
 
+def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict) -> Path:
+    """``end_to_end``'s raw RGGB brackets (12-bit TIFFs, dark frame, camera file, build file)
+    of ``views`` through the distorted cameras, in ``raw``; the same data on every call (fixed
+    seeds). Returns the folder."""
+    from abs.acquisition.camera_file import CameraModel, write_camera_file
+    from abs.acquisition.demosaic import cfa_masks
+    from abs.render import Camera
+
+    W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
+    dist = np.array(cfg["distortion"])
+    rng = np.random.default_rng(3)
+    white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
+    t_exp = np.array(cfg["exposures_s"])
+    raw.mkdir()
+    cams, build_views = {}, []
+    masks = cfa_masks((H, W), "RGGB")
+    for i, view in enumerate(views):
+        K = np.asarray(view["K"], np.float64)
+        f_r, w_r, h_r = render_pinhole_size(K, dist, W, H, n)
+        K_r = np.array([[f_r, 0, (w_r - 1) / 2], [0, f_r, (h_r - 1) / 2], [0, 0, 1]])
+        cam = Camera(K_r, np.asarray(view["R"]), np.asarray(view["t"]), w_r, h_r)
+        pin = compiled.render(cam, spp=cfg["truth_spp"] // (n * n) or 1, seed=500 + i).numpy()
+        rgb = distort_render(pin, f_r, K, dist, W, H, n)
+        L = np.sum(np.maximum(rgb, 0) * gain * masks, axis=-1)
+        name = f"cam{i}"
+        cams[name] = CameraModel(W, H, K, dist, R=np.asarray(view["R"]), t=np.asarray(view["t"]))
+        frames = []
+        for t in t_exp:
+            f = np.clip(np.round(rng.poisson(L * t) + black + rng.normal(0, read, L.shape)), 0, white)
+            fname = f"{name}_{int(round(t * 1000)):05d}ms.tif"
+            cv2.imwrite(str(raw / fname), f.astype(np.uint16))
+            frames.append(fname)
+        build_views.append({"name": view["name"], "camera": name, "frames": frames,
+                            "exposures_s": t_exp.tolist(), "darks": ["dark.tif"] * len(frames),
+                            "holdout": i == cfg["views"] - 1})
+    cv2.imwrite(str(raw / "dark.tif"), np.full((H, W), black, np.uint16))
+    write_camera_file(raw / "cameras.json", cams)
+    (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
+                                                "white_level": white, "views": build_views}))
+    return raw
+
+
+def _e2e_fit(scene_path: Path, folder: Path, unit: float, ds: int, truth: dict, cfg: dict) -> dict:
+    """``end_to_end``'s fit of ``environment.scale`` and ``glass.absorption`` on a capture from
+    the common start; ``environment.scale`` divided by ``unit`` (the sensor gain for a built
+    capture) before comparison with the truth."""
+    from abs.fitting import FitSettings, fit
+
+    t1 = time.perf_counter()
+    settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
+                           refinement_steps=cfg["refinement_steps"], downsample=ds)
+    initial = {"environment.scale": [truth["environment.scale"] * unit * cfg["start_scale_factor"]],
+               "glass.absorption": cfg["start_absorption"]}
+    result = fit(scene_path, folder, settings=settings, initial=initial)
+    scale = float(np.ravel(result.values["environment.scale"])[0]) / unit
+    absorption = np.ravel(result.values["glass.absorption"])
+    stderr = result.vector.split(result.uncertainty.stderr)
+    scale_se = float(np.ravel(stderr["environment.scale"])[0]) / unit
+    absorption_se = np.ravel(stderr["glass.absorption"])
+    true_abs = np.array(truth["glass.absorption"])
+    holdout = result.metrics.get("holdout_rmse") or {}
+    return {
+        "environment_scale": scale, "environment_scale_stderr": scale_se,
+        "environment_scale_rel_error": scale / truth["environment.scale"] - 1,
+        "glass_absorption": absorption.tolist(),
+        "glass_absorption_stderr": absorption_se.tolist(),
+        "glass_absorption_error": (absorption - true_abs).tolist(),
+        "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
+        "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
+        "downsample": ds,
+        "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
+        "seconds": time.perf_counter() - t1}
+
+
 def part_end_to_end() -> dict:
     from abs import load_scene
     from abs.acquisition.build import build_capture
-    from abs.acquisition.camera_file import CameraModel, write_camera_file
-    from abs.acquisition.demosaic import cfa_masks
-    from abs.fitting import FitSettings, fit
-    from abs.render import Camera, compile_scene
+    from abs.render import compile_scene
     from abs.simulate import place_cameras, simulate_capture
 
     t0 = time.perf_counter()
@@ -513,14 +587,11 @@ def part_end_to_end() -> dict:
     scene_path = ROOT / "scenes" / "default" / "scene.toml"
     scene = load_scene(scene_path)
     compiled = compile_scene(scene)
-    W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
+    W, H = cfg["width"], cfg["height"]
     views = place_cameras(compiled, cfg["views"], W, H)
-    dist = np.array(cfg["distortion"])
     truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
              "glass.absorption": compiled.get("glass.absorption").tolist()}
-    rng = np.random.default_rng(3)
-    white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
-    t_exp = np.array(cfg["exposures_s"])
+    gain = cfg["gain_dn_per_s"]
     out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -531,34 +602,7 @@ def part_end_to_end() -> dict:
         out["simulate_seconds"] = time.perf_counter() - t1
         # Raw brackets through distorted cameras.
         t1 = time.perf_counter()
-        raw = tmp / "raw"
-        raw.mkdir()
-        cams, build_views = {}, []
-        masks = cfa_masks((H, W), "RGGB")
-        for i, view in enumerate(views):
-            K = np.asarray(view["K"], np.float64)
-            f_r, w_r, h_r = render_pinhole_size(K, dist, W, H, n)
-            K_r = np.array([[f_r, 0, (w_r - 1) / 2], [0, f_r, (h_r - 1) / 2], [0, 0, 1]])
-            cam = Camera(K_r, np.asarray(view["R"]), np.asarray(view["t"]), w_r, h_r)
-            pin = compiled.render(cam, spp=cfg["truth_spp"] // (n * n) or 1, seed=500 + i).numpy()
-            rgb = distort_render(pin, f_r, K, dist, W, H, n)
-            L = np.sum(np.maximum(rgb, 0) * gain * masks, axis=-1)
-            name = f"cam{i}"
-            cams[name] = CameraModel(W, H, K, dist, R=np.asarray(view["R"]), t=np.asarray(view["t"]))
-            frames = []
-            for t in t_exp:
-                f = np.clip(np.round(rng.poisson(L * t) + black + rng.normal(0, read, L.shape)), 0, white)
-                fname = f"{name}_{int(round(t * 1000)):05d}ms.tif"
-                cv2.imwrite(str(raw / fname), f.astype(np.uint16))
-                frames.append(fname)
-            build_views.append({"name": view["name"], "camera": name, "frames": frames,
-                                "exposures_s": t_exp.tolist(), "darks": ["dark.tif"] * len(frames),
-                                "holdout": i == cfg["views"] - 1})
-        cv2.imwrite(str(raw / "dark.tif"), np.full((H, W), black, np.uint16))
-        write_camera_file(raw / "cameras.json", cams)
-        (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
-                                                    "white_level": white,
-                                                    "views": build_views}))
+        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
         _, merges = build_capture(raw / "build.json", tmp / "built")
         out["raw_seconds"] = time.perf_counter() - t1
         out["saturated_everywhere"] = int(sum(m.saturated_everywhere.sum() for m in merges.values()))
@@ -569,30 +613,42 @@ def part_end_to_end() -> dict:
                 for label, folder, unit in (("simulate", tmp / "simulated", 1.0),
                                             ("built_from_raw", tmp / "built", gain))]
         for label, folder, unit, ds in runs:
-            t1 = time.perf_counter()
-            settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
-                                   refinement_steps=cfg["refinement_steps"], downsample=ds)
-            initial = {"environment.scale": [truth["environment.scale"] * unit * cfg["start_scale_factor"]],
-                       "glass.absorption": cfg["start_absorption"]}
-            result = fit(scene_path, folder, settings=settings, initial=initial)
-            scale = float(np.ravel(result.values["environment.scale"])[0]) / unit
-            absorption = np.ravel(result.values["glass.absorption"])
-            stderr = result.vector.split(result.uncertainty.stderr)
-            scale_se = float(np.ravel(stderr["environment.scale"])[0]) / unit
-            absorption_se = np.ravel(stderr["glass.absorption"])
-            true_abs = np.array(truth["glass.absorption"])
-            holdout = result.metrics.get("holdout_rmse") or {}
-            out[label] = {
-                "environment_scale": scale, "environment_scale_stderr": scale_se,
-                "environment_scale_rel_error": scale / truth["environment.scale"] - 1,
-                "glass_absorption": absorption.tolist(),
-                "glass_absorption_stderr": absorption_se.tolist(),
-                "glass_absorption_error": (absorption - true_abs).tolist(),
-                "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
-                "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
-                "downsample": ds,
-                "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
-                "seconds": time.perf_counter() - t1}
+            out[label] = _e2e_fit(scene_path, folder, unit, ds, truth, cfg)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def part_end_to_end_superpixel() -> dict:
+    """``end_to_end``'s raw brackets (regenerated: the same data) built with
+    ``demosaic = "superpixel"`` (64x48 capture, the half-resolution cameras) and fitted at
+    downsample 1, with the same settings and start. Also refits the bilinear build at downsample 2
+    (``built_from_raw_downsample2``'s fit, the same 64x48 fitted resolution) as a check that the
+    data and fit reproduce the ``end_to_end`` part's."""
+    from abs import load_scene
+    from abs.acquisition.build import build_capture
+    from abs.render import compile_scene
+    from abs.simulate import place_cameras
+
+    t0 = time.perf_counter()
+    cfg = E2E
+    scene_path = ROOT / "scenes" / "default" / "scene.toml"
+    compiled = compile_scene(load_scene(scene_path))
+    views = place_cameras(compiled, cfg["views"], cfg["width"], cfg["height"])
+    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
+             "glass.absorption": compiled.get("glass.absorption").tolist()}
+    out: dict = {"config": "as end_to_end; build demosaic superpixel", "truth": truth}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
+        capture, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+        build_capture(raw / "build.json", tmp / "bilinear")
+        out["capture_size"] = list(capture.views[0].read_image().shape[1::-1])
+        out["cameras_K"] = {v.name: np.asarray(v.K).tolist() for v in capture.views}
+        gain = cfg["gain_dn_per_s"]
+        out["built_from_raw_superpixel"] = _e2e_fit(scene_path, tmp / "superpixel", gain, 1,
+                                                    truth, cfg)
+        out["built_from_raw_downsample2_rerun"] = _e2e_fit(scene_path, tmp / "bilinear", gain, 2,
+                                                           truth, cfg)
     out["seconds"] = time.perf_counter() - t0
     return out
 
@@ -710,7 +766,8 @@ def part_pipeline_contrast() -> dict:
 PARTS = {"real_stereo": part_real_stereo, "real_hdr": part_real_hdr,
          "synthetic_calibration": part_synthetic_calibration,
          "synthetic_hdr": part_synthetic_hdr, "end_to_end": part_end_to_end,
-         "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr}
+         "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr,
+         "end_to_end_superpixel": part_end_to_end_superpixel}
 
 
 def _f(v, fmt="{:.3f}") -> str:
@@ -785,11 +842,14 @@ def write_markdown(results: dict, path: Path) -> None:
                   f"{h['jpeg_like']['log_error_p95_abs']:.3f} | |"]
     e = parts.get("end_to_end")
     if e:
+        sp = parts.get("end_to_end_superpixel") or {}
         for label in ("simulate", "built_from_raw", "simulate_downsample2",
-                      "built_from_raw_downsample2"):
-            x = e.get(label)
+                      "built_from_raw_downsample2", "built_from_raw_superpixel"):
+            x = e.get(label) or sp.get(label)
             if x:
                 cfg = e["config"]
+                note = (" (64x48 capture, fitted at downsample 1)"
+                        if label == "built_from_raw_superpixel" else "")
                 lines.append(
                     f"| end to end, default scene, {cfg['views']} views {cfg['width']}x"
                     f"{cfg['height']} | {label}: environment.scale error; glass.absorption error "
@@ -799,7 +859,7 @@ def write_markdown(results: dict, path: Path) -> None:
                     + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
                                 zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
                     + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
-                    f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f} |")
+                    f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f}{note} |")
     ex = parts.get("end_to_end_exr")
     if ex:
         lines.append(
