@@ -29,6 +29,8 @@ Parts (each resumable: a part already in the JSON is skipped unless ``--force``)
 - ``end_to_end_superpixel``: ``end_to_end``'s raw brackets (the same data, regenerated) built
   with ``demosaic = "superpixel"`` (a 64x48 capture) and fitted with the same settings; also
   refits the bilinear build at downsample 2 to check that the part reproduces ``end_to_end``.
+- ``end_to_end_replicates``: ``end_to_end`` and ``end_to_end_superpixel``'s fits repeated with
+  3 other noise seeds (sensor and ``abs simulate``): run-to-run spread of every variant.
 
 Writes ``benchmarks/results/acquisition.json`` and ``benchmarks/results/acquisition.md``.
 
@@ -502,17 +504,17 @@ E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
        "start_absorption": [2.5, 2.5, 2.5], "downsamples": [1, 2]}
 
 
-def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict) -> Path:
+def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict, noise_seed: int = 3) -> Path:
     """``end_to_end``'s raw RGGB brackets (12-bit TIFFs, dark frame, camera file, build file)
-    of ``views`` through the distorted cameras, in ``raw``; the same data on every call (fixed
-    seeds). Returns the folder."""
+    of ``views`` through the distorted cameras, in ``raw``; the same data on every call with the
+    same ``noise_seed`` (the sensor noise's; the renders' seeds are fixed). Returns the folder."""
     from abs.acquisition.camera_file import CameraModel, write_camera_file
     from abs.acquisition.demosaic import cfa_masks
     from abs.render import Camera
 
     W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
     dist = np.array(cfg["distortion"])
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(noise_seed)
     white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
     t_exp = np.array(cfg["exposures_s"])
     raw.mkdir()
@@ -653,6 +655,69 @@ def part_end_to_end_superpixel() -> dict:
     return out
 
 
+#: Sensor-noise seeds of ``end_to_end_replicates`` (``end_to_end`` itself uses 3).
+E2E_REPLICATE_SEEDS = (11, 12, 13)
+
+
+def part_end_to_end_replicates() -> dict:
+    """``end_to_end`` repeated with other sensor-noise seeds (raw brackets) and ``abs simulate``
+    seeds, the same renders, settings and start: for each seed the simulated capture at
+    downsample 1 and 2, the bilinear build at downsample 1 and 2 and the superpixel build at
+    downsample 1. Per variant: each replicate's errors and their mean and standard deviation
+    across replicates (run-to-run spread, to set beside the fits' Laplace standard errors)."""
+    from abs import load_scene
+    from abs.acquisition.build import build_capture
+    from abs.render import compile_scene
+    from abs.simulate import place_cameras, simulate_capture
+
+    t0 = time.perf_counter()
+    cfg = E2E
+    scene_path = ROOT / "scenes" / "default" / "scene.toml"
+    scene = load_scene(scene_path)
+    compiled = compile_scene(scene)
+    W, H = cfg["width"], cfg["height"]
+    views = place_cameras(compiled, cfg["views"], W, H)
+    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
+             "glass.absorption": compiled.get("glass.absorption").tolist()}
+    gain = cfg["gain_dn_per_s"]
+    variants = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
+                ("built_from_raw", "bilinear", gain, 1),
+                ("built_from_raw_downsample2", "bilinear", gain, 2),
+                ("built_from_raw_superpixel", "superpixel", gain, 1))
+    out: dict = {"config": "as end_to_end; sensor-noise seeds " + ", ".join(
+        map(str, E2E_REPLICATE_SEEDS)) + " (raw), the same seeds for abs simulate",
+        "truth": truth, "replicates": {}}
+    for seed in E2E_REPLICATE_SEEDS:
+        rep: dict = {}
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=W, height=H,
+                             spp=cfg["truth_spp"], shot_noise=1e-4, read_noise=0.003, seed=seed)
+            raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=seed)
+            build_capture(raw / "build.json", tmp / "bilinear")
+            build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+            for label, folder, unit, ds in variants:
+                rep[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
+                print(seed, label, np.round(rep[label]["glass_absorption_error"], 2),
+                      flush=True)
+        out["replicates"][str(seed)] = rep
+    out["summary"] = {}
+    for label, *_ in variants:
+        err = np.array([r[label]["glass_absorption_error"]
+                        for r in out["replicates"].values()])
+        scale = np.array([r[label]["environment_scale_rel_error"]
+                          for r in out["replicates"].values()])
+        se = np.array([r[label]["glass_absorption_stderr"] for r in out["replicates"].values()])
+        out["summary"][label] = {
+            "glass_absorption_error_mean": err.mean(0).tolist(),
+            "glass_absorption_error_sd": err.std(0, ddof=1).tolist(),
+            "glass_absorption_stderr_mean": se.mean(0).tolist(),
+            "environment_scale_rel_error_mean": float(scale.mean()),
+            "environment_scale_rel_error_sd": float(scale.std(ddof=1))}
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
 def part_end_to_end_exr() -> dict:
     """``end_to_end``'s built capture without the mosaic: the same distorted renders written as
     one linear EXR frame per view (noise as ``abs simulate``'s), undistorted by ``build_capture``
@@ -722,8 +787,8 @@ def part_pipeline_contrast() -> dict:
     pinhole image at the capture's K (area-integrated), per pattern period in pixels. A fitted
     model renders the ideal image: lost contrast is a bias the fit must absorb."""
     from abs.acquisition.camera_file import CameraModel
-    from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
-    from abs.acquisition.undistort import pinhole_K, undistort_image
+    from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear, demosaic_superpixel
+    from abs.acquisition.undistort import pinhole_K, superpixel_camera, undistort_image
     from abs.camera.pinhole import intrinsics_from_fov
 
     W, H, n = E2E["width"], E2E["height"], E2E["supersample"]
@@ -738,13 +803,28 @@ def part_pipeline_contrast() -> dict:
         return 1 + 0.5 * np.sin(2 * np.pi * xn * K[0, 0] / period) \
             * np.sin(2 * np.pi * yn * K[0, 0] / period * 1.1)
 
+    half = superpixel_camera(cam)
+    K_half = pinhole_K(half)
     out: dict = {"pattern": "1 + 0.5 sin(2 pi x / P) sin(2 pi 1.1 y / P), grey, P in pixels",
-                 "contrast_kept": {}}
+                 "contrast_kept": {},
+                 "contrast_kept_64x48": {},
+                 "note_64x48": "against the ideal image area-integrated over 64x48 pixels (what "
+                               "a fit at that resolution renders): 'superpixel' is the superpixel "
+                               "build (half-resolution camera), 'bilinear_downsample2' the "
+                               "bilinear build box-averaged by 2 (fit downsample 2)"}
     ys, xs = np.mgrid[0:h_r, 0:w_r]
     s = 4
     yy, xx = np.mgrid[0:H * s, 0:W * s]
     u, v = (xx - (s - 1) / 2) / s, (yy - (s - 1) / 2) / s
+    yh, xh = np.mgrid[0:(H // 2) * s, 0:(W // 2) * s]
+    uh, vh = (xh - (s - 1) / 2) / s, (yh - (s - 1) / 2) / s
     inner = (slice(8, -8), slice(8, -8))
+    inner_h = (slice(4, -4), slice(4, -4))
+
+    def kept_of(ref_img, got, where):
+        a = ref_img[where] - np.mean(ref_img[where])
+        return {c: float(np.sum(a * (got[where][..., i] - np.mean(got[where][..., i])))
+                         / np.sum(a * a)) for i, c in enumerate("RGB")}
     for period in (3, 4, 6, 8, 12, 16):
         pin = pattern((xs - (w_r - 1) / 2) / f_r, (ys - (h_r - 1) / 2) / f_r, period)
         img = distort_render(np.repeat(pin[..., None], 3, -1).astype(np.float32), f_r, K, dist,
@@ -758,6 +838,16 @@ def part_pipeline_contrast() -> dict:
                 for i, c in enumerate("RGB")}
         kept["without_demosaic"] = float(np.sum(a * (no_demosaic[inner][..., 0] - 1)) / np.sum(a * a))
         out["contrast_kept"][str(period)] = kept
+        # At 64x48: the superpixel build, and the bilinear build averaged over 2x2 pixels.
+        sp = undistort_image(demosaic_superpixel(np.sum(img * masks, -1), "RGGB"), half, K_half)
+        ref_sp = cv2.resize(pattern((uh - K_half[0, 2]) / K_half[0, 0],
+                                    (vh - K_half[1, 2]) / K_half[1, 1], period).astype(np.float32),
+                            (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        ref_ds = cv2.resize(ref, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        ds = cv2.resize(full, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        out["contrast_kept_64x48"][str(period)] = {
+            "superpixel": kept_of(ref_sp, sp, inner_h),
+            "bilinear_downsample2": kept_of(ref_ds, ds, inner_h)}
     return out
 
 
@@ -767,7 +857,8 @@ PARTS = {"real_stereo": part_real_stereo, "real_hdr": part_real_hdr,
          "synthetic_calibration": part_synthetic_calibration,
          "synthetic_hdr": part_synthetic_hdr, "end_to_end": part_end_to_end,
          "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr,
-         "end_to_end_superpixel": part_end_to_end_superpixel}
+         "end_to_end_superpixel": part_end_to_end_superpixel,
+         "end_to_end_replicates": part_end_to_end_replicates}
 
 
 def _f(v, fmt="{:.3f}") -> str:
@@ -860,6 +951,19 @@ def write_markdown(results: dict, path: Path) -> None:
                                 zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
                     + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
                     f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f}{note} |")
+    rp = parts.get("end_to_end_replicates")
+    if rp:
+        n_rep = len(rp["replicates"])
+        for label, x in rp["summary"].items():
+            lines.append(
+                f"| {'same, ' + str(n_rep) + ' more noise seeds' if label == 'simulate' else ''} "
+                f"| {label}: environment.scale error; glass.absorption error (1/m), mean ± "
+                f"spread (sd) over the seeds | {100 * x['environment_scale_rel_error_mean']:+.2f} % "
+                f"(± {100 * x['environment_scale_rel_error_sd']:.2f} %); "
+                + ", ".join(f"{v:+.2f} ± {sd:.2f}" for v, sd in
+                            zip(x["glass_absorption_error_mean"], x["glass_absorption_error_sd"]))
+                + " | fits' own standard errors: "
+                + ", ".join(f"{v:.2f}" for v in x["glass_absorption_stderr_mean"]) + " |")
     ex = parts.get("end_to_end_exr")
     if ex:
         lines.append(
@@ -876,6 +980,14 @@ def write_markdown(results: dict, path: Path) -> None:
                          f"| pattern period {period} px: contrast kept R, G, B (no demosaic) | "
                          f"{kept['R']:.2f}, {kept['G']:.2f}, {kept['B']:.2f} "
                          f"({kept['without_demosaic']:.2f}) | 1 = none lost |")
+        for period, kept in pc.get("contrast_kept_64x48", {}).items():
+            sp, ds = kept["superpixel"], kept["bilinear_downsample2"]
+            lines.append(f"| {'same, fitted at 64x48' if period == '3' else ''} "
+                         f"| pattern period {period} px (of 128x96): contrast kept R, G, B: "
+                         f"superpixel; bilinear + downsample 2 | "
+                         f"{sp['R']:.2f}, {sp['G']:.2f}, {sp['B']:.2f}; "
+                         f"{ds['R']:.2f}, {ds['G']:.2f}, {ds['B']:.2f} | against the ideal "
+                         f"64x48 image |")
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
