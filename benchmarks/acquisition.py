@@ -26,6 +26,11 @@ Parts (each resumable: a part already in the JSON is skipped unless ``--force``)
   holdout) with lens distortion; raw RGGB brackets (7 exposures) rendered through the distorted
   camera, ``abs capture build`` with dark frames, then ``abs.fit`` of ``environment.scale`` and
   ``glass.absorption``, against the same fit on an ``abs simulate`` capture of the same views.
+- ``end_to_end_superpixel``: ``end_to_end``'s raw brackets (the same data, regenerated) built
+  with ``demosaic = "superpixel"`` (a 64x48 capture) and fitted with the same settings; also
+  refits the bilinear build at downsample 2 to check that the part reproduces ``end_to_end``.
+- ``end_to_end_replicates``: ``end_to_end`` and ``end_to_end_superpixel``'s fits repeated with
+  3 other noise seeds (sensor and ``abs simulate``): run-to-run spread of every variant.
 
 Writes ``benchmarks/results/acquisition.json`` and ``benchmarks/results/acquisition.md``.
 
@@ -499,13 +504,84 @@ E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
        "start_absorption": [2.5, 2.5, 2.5], "downsamples": [1, 2]}
 
 
+def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict, noise_seed: int = 3) -> Path:
+    """``end_to_end``'s raw RGGB brackets (12-bit TIFFs, dark frame, camera file, build file)
+    of ``views`` through the distorted cameras, in ``raw``; the same data on every call with the
+    same ``noise_seed`` (the sensor noise's; the renders' seeds are fixed). Returns the folder."""
+    from abs.acquisition.camera_file import CameraModel, write_camera_file
+    from abs.acquisition.demosaic import cfa_masks
+    from abs.render import Camera
+
+    W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
+    dist = np.array(cfg["distortion"])
+    rng = np.random.default_rng(noise_seed)
+    white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
+    t_exp = np.array(cfg["exposures_s"])
+    raw.mkdir()
+    cams, build_views = {}, []
+    masks = cfa_masks((H, W), "RGGB")
+    for i, view in enumerate(views):
+        K = np.asarray(view["K"], np.float64)
+        f_r, w_r, h_r = render_pinhole_size(K, dist, W, H, n)
+        K_r = np.array([[f_r, 0, (w_r - 1) / 2], [0, f_r, (h_r - 1) / 2], [0, 0, 1]])
+        cam = Camera(K_r, np.asarray(view["R"]), np.asarray(view["t"]), w_r, h_r)
+        pin = compiled.render(cam, spp=cfg["truth_spp"] // (n * n) or 1, seed=500 + i).numpy()
+        rgb = distort_render(pin, f_r, K, dist, W, H, n)
+        L = np.sum(np.maximum(rgb, 0) * gain * masks, axis=-1)
+        name = f"cam{i}"
+        cams[name] = CameraModel(W, H, K, dist, R=np.asarray(view["R"]), t=np.asarray(view["t"]))
+        frames = []
+        for t in t_exp:
+            f = np.clip(np.round(rng.poisson(L * t) + black + rng.normal(0, read, L.shape)), 0, white)
+            fname = f"{name}_{int(round(t * 1000)):05d}ms.tif"
+            cv2.imwrite(str(raw / fname), f.astype(np.uint16))
+            frames.append(fname)
+        build_views.append({"name": view["name"], "camera": name, "frames": frames,
+                            "exposures_s": t_exp.tolist(), "darks": ["dark.tif"] * len(frames),
+                            "holdout": i == cfg["views"] - 1})
+    cv2.imwrite(str(raw / "dark.tif"), np.full((H, W), black, np.uint16))
+    write_camera_file(raw / "cameras.json", cams)
+    (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
+                                                "white_level": white, "views": build_views}))
+    return raw
+
+
+def _e2e_fit(scene_path: Path, folder: Path, unit: float, ds: int, truth: dict, cfg: dict) -> dict:
+    """``end_to_end``'s fit of ``environment.scale`` and ``glass.absorption`` on a capture from
+    the common start; ``environment.scale`` divided by ``unit`` (the sensor gain for a built
+    capture) before comparison with the truth."""
+    from abs.fitting import FitSettings, fit
+
+    t1 = time.perf_counter()
+    settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
+                           refinement_steps=cfg["refinement_steps"], downsample=ds)
+    initial = {"environment.scale": [truth["environment.scale"] * unit * cfg["start_scale_factor"]],
+               "glass.absorption": cfg["start_absorption"]}
+    result = fit(scene_path, folder, settings=settings, initial=initial)
+    scale = float(np.ravel(result.values["environment.scale"])[0]) / unit
+    absorption = np.ravel(result.values["glass.absorption"])
+    stderr = result.vector.split(result.uncertainty.stderr)
+    scale_se = float(np.ravel(stderr["environment.scale"])[0]) / unit
+    absorption_se = np.ravel(stderr["glass.absorption"])
+    true_abs = np.array(truth["glass.absorption"])
+    holdout = result.metrics.get("holdout_rmse") or {}
+    return {
+        "environment_scale": scale, "environment_scale_stderr": scale_se,
+        "environment_scale_rel_error": scale / truth["environment.scale"] - 1,
+        "glass_absorption": absorption.tolist(),
+        "glass_absorption_stderr": absorption_se.tolist(),
+        "glass_absorption_error": (absorption - true_abs).tolist(),
+        "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
+        "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
+        "downsample": ds,
+        "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
+        "seconds": time.perf_counter() - t1}
+
+
 def part_end_to_end() -> dict:
     from abs import load_scene
     from abs.acquisition.build import build_capture
-    from abs.acquisition.camera_file import CameraModel, write_camera_file
-    from abs.acquisition.demosaic import cfa_masks
-    from abs.fitting import FitSettings, fit
-    from abs.render import Camera, compile_scene
+    from abs.render import compile_scene
     from abs.simulate import place_cameras, simulate_capture
 
     t0 = time.perf_counter()
@@ -513,14 +589,11 @@ def part_end_to_end() -> dict:
     scene_path = ROOT / "scenes" / "default" / "scene.toml"
     scene = load_scene(scene_path)
     compiled = compile_scene(scene)
-    W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
+    W, H = cfg["width"], cfg["height"]
     views = place_cameras(compiled, cfg["views"], W, H)
-    dist = np.array(cfg["distortion"])
     truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
              "glass.absorption": compiled.get("glass.absorption").tolist()}
-    rng = np.random.default_rng(3)
-    white, black, read, gain = 4095.0, 64.0, 2.0, cfg["gain_dn_per_s"]
-    t_exp = np.array(cfg["exposures_s"])
+    gain = cfg["gain_dn_per_s"]
     out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -531,34 +604,7 @@ def part_end_to_end() -> dict:
         out["simulate_seconds"] = time.perf_counter() - t1
         # Raw brackets through distorted cameras.
         t1 = time.perf_counter()
-        raw = tmp / "raw"
-        raw.mkdir()
-        cams, build_views = {}, []
-        masks = cfa_masks((H, W), "RGGB")
-        for i, view in enumerate(views):
-            K = np.asarray(view["K"], np.float64)
-            f_r, w_r, h_r = render_pinhole_size(K, dist, W, H, n)
-            K_r = np.array([[f_r, 0, (w_r - 1) / 2], [0, f_r, (h_r - 1) / 2], [0, 0, 1]])
-            cam = Camera(K_r, np.asarray(view["R"]), np.asarray(view["t"]), w_r, h_r)
-            pin = compiled.render(cam, spp=cfg["truth_spp"] // (n * n) or 1, seed=500 + i).numpy()
-            rgb = distort_render(pin, f_r, K, dist, W, H, n)
-            L = np.sum(np.maximum(rgb, 0) * gain * masks, axis=-1)
-            name = f"cam{i}"
-            cams[name] = CameraModel(W, H, K, dist, R=np.asarray(view["R"]), t=np.asarray(view["t"]))
-            frames = []
-            for t in t_exp:
-                f = np.clip(np.round(rng.poisson(L * t) + black + rng.normal(0, read, L.shape)), 0, white)
-                fname = f"{name}_{int(round(t * 1000)):05d}ms.tif"
-                cv2.imwrite(str(raw / fname), f.astype(np.uint16))
-                frames.append(fname)
-            build_views.append({"name": view["name"], "camera": name, "frames": frames,
-                                "exposures_s": t_exp.tolist(), "darks": ["dark.tif"] * len(frames),
-                                "holdout": i == cfg["views"] - 1})
-        cv2.imwrite(str(raw / "dark.tif"), np.full((H, W), black, np.uint16))
-        write_camera_file(raw / "cameras.json", cams)
-        (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
-                                                    "white_level": white,
-                                                    "views": build_views}))
+        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
         _, merges = build_capture(raw / "build.json", tmp / "built")
         out["raw_seconds"] = time.perf_counter() - t1
         out["saturated_everywhere"] = int(sum(m.saturated_everywhere.sum() for m in merges.values()))
@@ -569,30 +615,105 @@ def part_end_to_end() -> dict:
                 for label, folder, unit in (("simulate", tmp / "simulated", 1.0),
                                             ("built_from_raw", tmp / "built", gain))]
         for label, folder, unit, ds in runs:
-            t1 = time.perf_counter()
-            settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
-                                   refinement_steps=cfg["refinement_steps"], downsample=ds)
-            initial = {"environment.scale": [truth["environment.scale"] * unit * cfg["start_scale_factor"]],
-                       "glass.absorption": cfg["start_absorption"]}
-            result = fit(scene_path, folder, settings=settings, initial=initial)
-            scale = float(np.ravel(result.values["environment.scale"])[0]) / unit
-            absorption = np.ravel(result.values["glass.absorption"])
-            stderr = result.vector.split(result.uncertainty.stderr)
-            scale_se = float(np.ravel(stderr["environment.scale"])[0]) / unit
-            absorption_se = np.ravel(stderr["glass.absorption"])
-            true_abs = np.array(truth["glass.absorption"])
-            holdout = result.metrics.get("holdout_rmse") or {}
-            out[label] = {
-                "environment_scale": scale, "environment_scale_stderr": scale_se,
-                "environment_scale_rel_error": scale / truth["environment.scale"] - 1,
-                "glass_absorption": absorption.tolist(),
-                "glass_absorption_stderr": absorption_se.tolist(),
-                "glass_absorption_error": (absorption - true_abs).tolist(),
-                "glass_absorption_z": ((absorption - true_abs) / absorption_se).tolist(),
-                "glass_absorption_rel_error": (absorption / true_abs - 1).tolist(),
-                "downsample": ds,
-                "holdout_rmse_in_scene_units": {k: v / unit for k, v in holdout.items()},
-                "seconds": time.perf_counter() - t1}
+            out[label] = _e2e_fit(scene_path, folder, unit, ds, truth, cfg)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def part_end_to_end_superpixel() -> dict:
+    """``end_to_end``'s raw brackets (regenerated: the same data) built with
+    ``demosaic = "superpixel"`` (64x48 capture, the half-resolution cameras) and fitted at
+    downsample 1, with the same settings and start. Also refits the bilinear build at downsample 2
+    (``built_from_raw_downsample2``'s fit, the same 64x48 fitted resolution) as a check that the
+    data and fit reproduce the ``end_to_end`` part's."""
+    from abs import load_scene
+    from abs.acquisition.build import build_capture
+    from abs.render import compile_scene
+    from abs.simulate import place_cameras
+
+    t0 = time.perf_counter()
+    cfg = E2E
+    scene_path = ROOT / "scenes" / "default" / "scene.toml"
+    compiled = compile_scene(load_scene(scene_path))
+    views = place_cameras(compiled, cfg["views"], cfg["width"], cfg["height"])
+    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
+             "glass.absorption": compiled.get("glass.absorption").tolist()}
+    out: dict = {"config": "as end_to_end; build demosaic superpixel", "truth": truth}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
+        capture, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+        build_capture(raw / "build.json", tmp / "bilinear")
+        out["capture_size"] = list(capture.views[0].read_image().shape[1::-1])
+        out["cameras_K"] = {v.name: np.asarray(v.K).tolist() for v in capture.views}
+        gain = cfg["gain_dn_per_s"]
+        out["built_from_raw_superpixel"] = _e2e_fit(scene_path, tmp / "superpixel", gain, 1,
+                                                    truth, cfg)
+        out["built_from_raw_downsample2_rerun"] = _e2e_fit(scene_path, tmp / "bilinear", gain, 2,
+                                                           truth, cfg)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+#: Sensor-noise seeds of ``end_to_end_replicates`` (``end_to_end`` itself uses 3).
+E2E_REPLICATE_SEEDS = (11, 12, 13)
+
+
+def part_end_to_end_replicates() -> dict:
+    """``end_to_end`` repeated with other sensor-noise seeds (raw brackets) and ``abs simulate``
+    seeds, the same renders, settings and start: for each seed the simulated capture at
+    downsample 1 and 2, the bilinear build at downsample 1 and 2 and the superpixel build at
+    downsample 1. Per variant: each replicate's errors and their mean and standard deviation
+    across replicates (run-to-run spread, to set beside the fits' Laplace standard errors)."""
+    from abs import load_scene
+    from abs.acquisition.build import build_capture
+    from abs.render import compile_scene
+    from abs.simulate import place_cameras, simulate_capture
+
+    t0 = time.perf_counter()
+    cfg = E2E
+    scene_path = ROOT / "scenes" / "default" / "scene.toml"
+    scene = load_scene(scene_path)
+    compiled = compile_scene(scene)
+    W, H = cfg["width"], cfg["height"]
+    views = place_cameras(compiled, cfg["views"], W, H)
+    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
+             "glass.absorption": compiled.get("glass.absorption").tolist()}
+    gain = cfg["gain_dn_per_s"]
+    variants = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
+                ("built_from_raw", "bilinear", gain, 1),
+                ("built_from_raw_downsample2", "bilinear", gain, 2),
+                ("built_from_raw_superpixel", "superpixel", gain, 1))
+    out: dict = {"config": "as end_to_end; sensor-noise seeds " + ", ".join(
+        map(str, E2E_REPLICATE_SEEDS)) + " (raw), the same seeds for abs simulate",
+        "truth": truth, "replicates": {}}
+    for seed in E2E_REPLICATE_SEEDS:
+        rep: dict = {}
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = Path(tmp)
+            simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=W, height=H,
+                             spp=cfg["truth_spp"], shot_noise=1e-4, read_noise=0.003, seed=seed)
+            raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=seed)
+            build_capture(raw / "build.json", tmp / "bilinear")
+            build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+            for label, folder, unit, ds in variants:
+                rep[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
+                print(seed, label, np.round(rep[label]["glass_absorption_error"], 2),
+                      flush=True)
+        out["replicates"][str(seed)] = rep
+    out["summary"] = {}
+    for label, *_ in variants:
+        err = np.array([r[label]["glass_absorption_error"]
+                        for r in out["replicates"].values()])
+        scale = np.array([r[label]["environment_scale_rel_error"]
+                          for r in out["replicates"].values()])
+        se = np.array([r[label]["glass_absorption_stderr"] for r in out["replicates"].values()])
+        out["summary"][label] = {
+            "glass_absorption_error_mean": err.mean(0).tolist(),
+            "glass_absorption_error_sd": err.std(0, ddof=1).tolist(),
+            "glass_absorption_stderr_mean": se.mean(0).tolist(),
+            "environment_scale_rel_error_mean": float(scale.mean()),
+            "environment_scale_rel_error_sd": float(scale.std(ddof=1))}
     out["seconds"] = time.perf_counter() - t0
     return out
 
@@ -666,8 +787,8 @@ def part_pipeline_contrast() -> dict:
     pinhole image at the capture's K (area-integrated), per pattern period in pixels. A fitted
     model renders the ideal image: lost contrast is a bias the fit must absorb."""
     from abs.acquisition.camera_file import CameraModel
-    from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
-    from abs.acquisition.undistort import pinhole_K, undistort_image
+    from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear, demosaic_superpixel
+    from abs.acquisition.undistort import pinhole_K, superpixel_camera, undistort_image
     from abs.camera.pinhole import intrinsics_from_fov
 
     W, H, n = E2E["width"], E2E["height"], E2E["supersample"]
@@ -682,13 +803,28 @@ def part_pipeline_contrast() -> dict:
         return 1 + 0.5 * np.sin(2 * np.pi * xn * K[0, 0] / period) \
             * np.sin(2 * np.pi * yn * K[0, 0] / period * 1.1)
 
+    half = superpixel_camera(cam)
+    K_half = pinhole_K(half)
     out: dict = {"pattern": "1 + 0.5 sin(2 pi x / P) sin(2 pi 1.1 y / P), grey, P in pixels",
-                 "contrast_kept": {}}
+                 "contrast_kept": {},
+                 "contrast_kept_64x48": {},
+                 "note_64x48": "against the ideal image area-integrated over 64x48 pixels (what "
+                               "a fit at that resolution renders): 'superpixel' is the superpixel "
+                               "build (half-resolution camera), 'bilinear_downsample2' the "
+                               "bilinear build box-averaged by 2 (fit downsample 2)"}
     ys, xs = np.mgrid[0:h_r, 0:w_r]
     s = 4
     yy, xx = np.mgrid[0:H * s, 0:W * s]
     u, v = (xx - (s - 1) / 2) / s, (yy - (s - 1) / 2) / s
+    yh, xh = np.mgrid[0:(H // 2) * s, 0:(W // 2) * s]
+    uh, vh = (xh - (s - 1) / 2) / s, (yh - (s - 1) / 2) / s
     inner = (slice(8, -8), slice(8, -8))
+    inner_h = (slice(4, -4), slice(4, -4))
+
+    def kept_of(ref_img, got, where):
+        a = ref_img[where] - np.mean(ref_img[where])
+        return {c: float(np.sum(a * (got[where][..., i] - np.mean(got[where][..., i])))
+                         / np.sum(a * a)) for i, c in enumerate("RGB")}
     for period in (3, 4, 6, 8, 12, 16):
         pin = pattern((xs - (w_r - 1) / 2) / f_r, (ys - (h_r - 1) / 2) / f_r, period)
         img = distort_render(np.repeat(pin[..., None], 3, -1).astype(np.float32), f_r, K, dist,
@@ -702,6 +838,16 @@ def part_pipeline_contrast() -> dict:
                 for i, c in enumerate("RGB")}
         kept["without_demosaic"] = float(np.sum(a * (no_demosaic[inner][..., 0] - 1)) / np.sum(a * a))
         out["contrast_kept"][str(period)] = kept
+        # At 64x48: the superpixel build, and the bilinear build averaged over 2x2 pixels.
+        sp = undistort_image(demosaic_superpixel(np.sum(img * masks, -1), "RGGB"), half, K_half)
+        ref_sp = cv2.resize(pattern((uh - K_half[0, 2]) / K_half[0, 0],
+                                    (vh - K_half[1, 2]) / K_half[1, 1], period).astype(np.float32),
+                            (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        ref_ds = cv2.resize(ref, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        ds = cv2.resize(full, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        out["contrast_kept_64x48"][str(period)] = {
+            "superpixel": kept_of(ref_sp, sp, inner_h),
+            "bilinear_downsample2": kept_of(ref_ds, ds, inner_h)}
     return out
 
 
@@ -710,7 +856,9 @@ def part_pipeline_contrast() -> dict:
 PARTS = {"real_stereo": part_real_stereo, "real_hdr": part_real_hdr,
          "synthetic_calibration": part_synthetic_calibration,
          "synthetic_hdr": part_synthetic_hdr, "end_to_end": part_end_to_end,
-         "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr}
+         "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr,
+         "end_to_end_superpixel": part_end_to_end_superpixel,
+         "end_to_end_replicates": part_end_to_end_replicates}
 
 
 def _f(v, fmt="{:.3f}") -> str:
@@ -785,11 +933,14 @@ def write_markdown(results: dict, path: Path) -> None:
                   f"{h['jpeg_like']['log_error_p95_abs']:.3f} | |"]
     e = parts.get("end_to_end")
     if e:
+        sp = parts.get("end_to_end_superpixel") or {}
         for label in ("simulate", "built_from_raw", "simulate_downsample2",
-                      "built_from_raw_downsample2"):
-            x = e.get(label)
+                      "built_from_raw_downsample2", "built_from_raw_superpixel"):
+            x = e.get(label) or sp.get(label)
             if x:
                 cfg = e["config"]
+                note = (" (64x48 capture, fitted at downsample 1)"
+                        if label == "built_from_raw_superpixel" else "")
                 lines.append(
                     f"| end to end, default scene, {cfg['views']} views {cfg['width']}x"
                     f"{cfg['height']} | {label}: environment.scale error; glass.absorption error "
@@ -799,7 +950,20 @@ def write_markdown(results: dict, path: Path) -> None:
                     + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
                                 zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
                     + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
-                    f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f} |")
+                    f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f}{note} |")
+    rp = parts.get("end_to_end_replicates")
+    if rp:
+        n_rep = len(rp["replicates"])
+        for label, x in rp["summary"].items():
+            lines.append(
+                f"| {'same, ' + str(n_rep) + ' more noise seeds' if label == 'simulate' else ''} "
+                f"| {label}: environment.scale error; glass.absorption error (1/m), mean ± "
+                f"spread (sd) over the seeds | {100 * x['environment_scale_rel_error_mean']:+.2f} % "
+                f"(± {100 * x['environment_scale_rel_error_sd']:.2f} %); "
+                + ", ".join(f"{v:+.2f} ± {sd:.2f}" for v, sd in
+                            zip(x["glass_absorption_error_mean"], x["glass_absorption_error_sd"]))
+                + " | fits' own standard errors: "
+                + ", ".join(f"{v:.2f}" for v in x["glass_absorption_stderr_mean"]) + " |")
     ex = parts.get("end_to_end_exr")
     if ex:
         lines.append(
@@ -816,6 +980,14 @@ def write_markdown(results: dict, path: Path) -> None:
                          f"| pattern period {period} px: contrast kept R, G, B (no demosaic) | "
                          f"{kept['R']:.2f}, {kept['G']:.2f}, {kept['B']:.2f} "
                          f"({kept['without_demosaic']:.2f}) | 1 = none lost |")
+        for period, kept in pc.get("contrast_kept_64x48", {}).items():
+            sp, ds = kept["superpixel"], kept["bilinear_downsample2"]
+            lines.append(f"| {'same, fitted at 64x48' if period == '3' else ''} "
+                         f"| pattern period {period} px (of 128x96): contrast kept R, G, B: "
+                         f"superpixel; bilinear + downsample 2 | "
+                         f"{sp['R']:.2f}, {sp['G']:.2f}, {sp['B']:.2f}; "
+                         f"{ds['R']:.2f}, {ds['G']:.2f}, {ds['B']:.2f} | against the ideal "
+                         f"64x48 image |")
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 

@@ -2,7 +2,7 @@
 
 Board detection (:mod:`.board`), intrinsic calibration (:mod:`.intrinsics`), stereo
 (:mod:`.stereo`), extrinsics from a board in the scene (:mod:`.extrinsics`), the camera file
-(:mod:`.camera_file`), undistortion (:mod:`.undistort`), raw mosaics (:mod:`.raw`), bilinear
-demosaicing (:mod:`.demosaic`), bracket merging (:mod:`.hdr`) and capture building
+(:mod:`.camera_file`), undistortion (:mod:`.undistort`), raw mosaics (:mod:`.raw`), bilinear and
+superpixel demosaicing (:mod:`.demosaic`), bracket merging (:mod:`.hdr`) and capture building
 (:mod:`.build`).
 """

@@ -3,13 +3,18 @@
 A build file (JSON, data only) lists the views::
 
     {"cameras": "calibration.json", "cfa_pattern": "RGGB", "white_level": 4095,
+     "demosaic": "bilinear",
      "views": [{"name": "v0", "camera": "left",
                 "frames": ["v0_001ms.tif", "v0_002ms.tif"], "exposures_s": [0.001, 0.002],
                 "darks": ["dark_001ms.tif", "dark_002ms.tif"], "holdout": false,
                 "mask": "v0_mask.png"}]}
 
 Paths are relative to the build file. Each frame is a raw mosaic (see :mod:`.raw`; demosaiced
-bilinearly with the file's CFA pattern, else ``cfa_pattern``) or a linear EXR. ``white_level``
+with the file's CFA pattern, else ``cfa_pattern``) or a linear EXR. ``demosaic`` (optional):
+``"bilinear"`` (default, full resolution) or ``"superpixel"`` (one RGB pixel per 2x2 CFA cell, no
+interpolation: frames, darks and the camera must have an even width and height, EXR frames are
+refused, the capture is half-size and its cameras are :func:`superpixel_camera`'s, masks keep a
+superpixel when all four of its pixels are kept). ``white_level``
 (optional, data numbers) replaces the file's own saturation level: a 12- or 14-bit sensor stored
 in 16-bit TIFFs saturates at 4095 or 16383, not at the container's 65535. A view's frames
 are merged (:func:`merge_brackets`) into data numbers per second, undistorted to the pinhole
@@ -30,10 +35,12 @@ import cv2
 import numpy as np
 
 from abs.acquisition.camera_file import read_camera_file
-from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
+from abs.acquisition.demosaic import (DEMOSAIC_METHODS, cfa_masks, demosaic_bilinear,
+                                      demosaic_superpixel, superpixel_any, superpixel_mask)
 from abs.acquisition.hdr import MergedHDR, merge_brackets
 from abs.acquisition.raw import read_raw
-from abs.acquisition.undistort import pinhole_K, undistort_image, undistort_mask
+from abs.acquisition.undistort import (pinhole_K, superpixel_camera, undistort_image,
+                                       undistort_mask)
 from abs.errors import InputError
 from abs.io.capture import Capture, save_capture
 from abs.io.images import read_image, read_mask
@@ -44,18 +51,30 @@ _VIEW_KEYS = {"name", "camera", "frames", "exposures_s", "darks", "holdout", "ma
 
 
 def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
-               white_level: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+               white_level: float | None = None, demosaic: str = "bilinear",
+               source: str | Path | None = None,
+               field: str = "") -> tuple[np.ndarray, np.ndarray]:
     """One frame as ``(H, W, 3)`` linear values (data numbers) and its saturation mask.
 
-    Raw mosaics are demosaiced bilinearly (CFA pattern from the file, else ``cfa_pattern``), with
-    the black level subtracted. A demosaiced pixel is saturated when any mosaic site within its
-    3x3 neighbourhood (the bilinear kernels' support) of the same colour is at or above
-    ``saturation`` times the white level (``white_level`` if given, else the file's):
+    Raw mosaics are demosaiced (CFA pattern from the file, else ``cfa_pattern``), with the black
+    level subtracted. ``demosaic="bilinear"``: a demosaiced pixel is saturated when any mosaic
+    site within its 3x3 neighbourhood (the bilinear kernels' support) of the same colour is at
+    or above ``saturation`` times the white level (``white_level`` if given, else the file's):
     interpolation would otherwise hide a clipped neighbour (at the border, reflected bilinear
-    gives half a clipped value). EXR files are taken as already linear RGB, never
-    saturated.
+    gives half a clipped value). ``demosaic="superpixel"``: ``(H/2, W/2, 3)``, a superpixel's
+    colour is saturated when any of its cell's sites of that colour is (for green, either of
+    two). EXR files are taken as already linear RGB, never saturated (bilinear only).
+    ``source`` and ``field`` (the build file and e.g. ``views[0].frames[2]``) name the input in
+    errors about the image's size or kind.
     """
+    if demosaic not in DEMOSAIC_METHODS:
+        raise InputError(source, "demosaic", f"expected one of {', '.join(DEMOSAIC_METHODS)}, "
+                                             f"got {demosaic!r}")
     if path.suffix.lower() == ".exr":
+        if demosaic == "superpixel":
+            raise InputError(source or path, field, f"{path.name} is a linear RGB EXR, not a "
+                                                    "mosaic: demosaic \"superpixel\" needs raw "
+                                                    "mosaics (use \"bilinear\" for EXR frames)")
         rgb = read_image(path).astype(np.float64)
         return rgb, np.zeros(rgb.shape, bool)
     frame = read_raw(path)
@@ -65,6 +84,15 @@ def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
                                               "cfa_pattern (RGGB, BGGR, GRBG or GBRG)")
     white = frame.white_level if white_level is None else float(white_level)
     clipped = frame.mosaic >= saturation * white
+    if demosaic == "superpixel":
+        h, w = frame.mosaic.shape
+        if h % 2 or w % 2:
+            raise InputError(source or path, field if source else "size",
+                             f"{path.name} is {w}x{h} pixels: demosaic \"superpixel\" needs an "
+                             "even width and height (crop one row or column of every frame, "
+                             "dark and mask, or use \"bilinear\")")
+        rgb = demosaic_superpixel(frame.mosaic - frame.black_level, pattern).astype(np.float64)
+        return rgb, superpixel_any(clipped, pattern)
     sites = cfa_masks(frame.mosaic.shape, pattern)
     near_clipped = np.stack([cv2.dilate((clipped & sites[..., c]).astype(np.uint8),
                                         np.ones((3, 3), np.uint8)).astype(bool)
@@ -74,7 +102,8 @@ def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
 
 
 def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path,
-              field: str, white_level: float | None = None) -> MergedHDR:
+              field: str, white_level: float | None = None,
+              demosaic: str = "bilinear") -> MergedHDR:
     frames = entry["frames"]
     if not isinstance(frames, list) or not frames:
         raise InputError(source, f"{field}.frames", "expected a non-empty list of files")
@@ -82,7 +111,9 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
     if not isinstance(exposures, list) or len(exposures) != len(frames):
         raise InputError(source, f"{field}.exposures_s", f"expected {len(frames)} exposure times "
                                                          "(seconds), one per frame")
-    loaded = [load_frame(folder / f, cfa, white_level=white_level) for f in frames]
+    loaded = [load_frame(folder / f, cfa, white_level=white_level, demosaic=demosaic,
+                         source=source, field=f"{field}.frames[{k}]")
+              for k, f in enumerate(frames)]
     shapes = {img.shape for img, _ in loaded}
     if len(shapes) > 1:
         raise InputError(source, f"{field}.frames", f"mixed image sizes {sorted(shapes)}")
@@ -91,7 +122,9 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
         if not isinstance(entry["darks"], list) or len(entry["darks"]) != len(frames):
             raise InputError(source, f"{field}.darks", f"expected {len(frames)} dark frames, one "
                                                        "per frame (the same file may repeat)")
-        darks = [load_frame(folder / f, cfa)[0] for f in entry["darks"]]
+        darks = [load_frame(folder / f, cfa, demosaic=demosaic, source=source,
+                            field=f"{field}.darks[{k}]")[0]
+                 for k, f in enumerate(entry["darks"])]
         for f, d in zip(entry["darks"], darks):
             if d.shape != loaded[0][0].shape:
                 raise InputError(folder / f, "", f"dark frame is {d.shape[1]}x{d.shape[0]}, "
@@ -102,9 +135,12 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
 
 
 def build_capture(build_file: str | Path, out: str | Path,
-                  progress: Callable[[int], None] | None = None) -> tuple[Capture,
-                                                                          dict[str, MergedHDR]]:
+                  progress: Callable[[int], None] | None = None,
+                  demosaic: str | None = None) -> tuple[Capture, dict[str, MergedHDR]]:
     """Build a capture folder from a build file (format in the module docstring).
+
+    ``demosaic`` (``"bilinear"`` or ``"superpixel"``) overrides the build file's ``demosaic``
+    (default ``"bilinear"``).
 
     Returns
     -------
@@ -131,6 +167,16 @@ def build_capture(build_file: str | Path, out: str | Path,
                                     or not white_level > 0):
         raise InputError(source, "white_level", f"expected a positive number of data numbers, "
                                                 f"got {white_level!r}")
+    if demosaic is None:
+        demosaic = spec.get("demosaic", DEMOSAIC_METHODS[0])
+        demosaic_source, demosaic_field = source, "demosaic"
+    else:
+        demosaic_source, demosaic_field = None, "demosaic"
+    if demosaic not in DEMOSAIC_METHODS:
+        raise InputError(demosaic_source, demosaic_field, f"expected one of "
+                                                          f"{', '.join(DEMOSAIC_METHODS)}, got "
+                                                          f"{demosaic!r}")
+    superpixel = demosaic == "superpixel"
     views, images, masks, merges = [], {}, {}, {}
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
@@ -148,17 +194,22 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                         f"camera file; known: "
                                                         f"{', '.join(sorted(cameras))}")
         cam = cameras[entry["camera"]]
-        merged = _view_hdr(entry, folder, cfa, source, field, white_level)
-        if merged.radiance.shape[:2] != (cam.height, cam.width):
-            raise InputError(source, f"{field}.frames", f"images are {merged.radiance.shape[1]}x"
-                                                        f"{merged.radiance.shape[0]}, camera "
+        merged = _view_hdr(entry, folder, cfa, source, field, white_level, demosaic)
+        factor = 2 if superpixel else 1
+        h_img, w_img = (factor * n for n in merged.radiance.shape[:2])
+        if (h_img, w_img) != (cam.height, cam.width):
+            raise InputError(source, f"{field}.frames", f"images are {w_img}x{h_img}, camera "
                                                         f"{entry['camera']} is {cam.width}x"
                                                         f"{cam.height}: mixed image sizes")
-        K_new = pinhole_K(cam)
-        images[entry["name"]] = undistort_image(merged.radiance, cam, K_new)
+        # The camera of the merged image: the calibrated one, or at superpixel resolution.
+        cam_img = superpixel_camera(cam) if superpixel else cam
+        K_new = pinhole_K(cam_img)
+        images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
-            masks[entry["name"]] = undistort_mask(mask, cam, K_new)
+            if superpixel:
+                mask = superpixel_mask(mask)
+            masks[entry["name"]] = undistort_mask(mask, cam_img, K_new)
         views.append({"name": entry["name"], "K": K_new, "R": cam.R, "t": cam.t,
                       "holdout": bool(entry.get("holdout", False))})
         merges[entry["name"]] = merged

@@ -4,6 +4,9 @@ The new pinhole K comes from ``getOptimalNewCameraMatrix`` with ``alpha = 0`` (o
 pixels, the image size kept): the focal length and the principal point move as undistortion
 moves them, and the undistorted image is resampled with ``initUndistortRectifyMap`` + ``remap``
 (bilinear). R and t are unchanged: undistortion does not move the camera.
+
+A superpixel-demosaiced image (:func:`abs.acquisition.demosaic.demosaic_superpixel`) is undistorted
+with :func:`superpixel_camera`, the calibrated camera at half resolution.
 """
 
 from __future__ import annotations
@@ -12,8 +15,24 @@ import cv2
 import numpy as np
 
 from abs.acquisition.camera_file import CameraModel
+from abs.acquisition.demosaic import superpixel_K
+from abs.errors import InputError
 
-__all__ = ["pinhole_K", "undistort_image", "undistort_mask"]
+__all__ = ["pinhole_K", "superpixel_camera", "undistort_image", "undistort_mask"]
+
+
+def superpixel_camera(camera: CameraModel) -> CameraModel:
+    """The calibrated (distorted) camera of a superpixel image: half the width and height, K by
+    :func:`abs.acquisition.demosaic.superpixel_K` (focal lengths halved, principal point
+    ``(c - 0.5) / 2``), the same distortion coefficients (they act on normalised coordinates),
+    R and t unchanged; ``rms_px`` halved."""
+    if camera.width % 2 or camera.height % 2:
+        raise InputError(None, "camera", f"the camera is {camera.width}x{camera.height} pixels; "
+                                         "superpixel images need an even width and height")
+    return CameraModel(camera.width // 2, camera.height // 2, superpixel_K(camera.K),
+                       np.array(camera.distortion, np.float64), np.array(camera.R, np.float64),
+                       np.array(camera.t, np.float64),
+                       None if camera.rms_px is None else camera.rms_px / 2)
 
 
 def pinhole_K(camera: CameraModel, alpha: float = 0.0) -> np.ndarray:

@@ -1,7 +1,8 @@
 """``abs capture build BUILD.json --out CAPTURE``: photographs + darks + calibration -> capture.
 
 The build file format is in :mod:`abs.acquisition.build`. ``--report DIR`` writes each view's
-HDR weight map (total exposure time used per pixel) as PNG.
+HDR weight map (total exposure time used per pixel) as PNG. ``--demosaic bilinear|superpixel``
+overrides the build file's ``demosaic`` (default bilinear; superpixel halves the resolution).
 """
 
 from __future__ import annotations
@@ -17,6 +18,10 @@ def add_parser(sub) -> None:
     q.add_argument("build_file", type=Path, help="build file (JSON) listing views and frames")
     q.add_argument("--out", type=Path, required=True, help="capture folder to write")
     q.add_argument("--report", type=Path, help="folder for the HDR weight maps")
+    q.add_argument("--demosaic", choices=("bilinear", "superpixel"), default=None,
+                   help="demosaicing method, overriding the build file's 'demosaic' (default "
+                        "bilinear): 'superpixel' makes one RGB pixel of each 2x2 CFA cell, no "
+                        "interpolation, a half-size capture with the half-resolution camera")
     q.set_defaults(run=run)
 
 
@@ -32,7 +37,8 @@ def run(args) -> int:
         else {}
     total = len(spec.get("views", [])) if isinstance(spec, dict) else None
     with tqdm(total=total, desc="build", unit="view") as bar:
-        capture, merges = build_capture(args.build_file, args.out, progress=bar.update)
+        capture, merges = build_capture(args.build_file, args.out, progress=bar.update,
+                                        demosaic=args.demosaic)
     for name, merged in merges.items():
         n_sat = int(merged.saturated_everywhere.sum())
         used = merged.used.reshape(merged.used.shape[0], -1).mean(axis=1)
