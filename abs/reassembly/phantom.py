@@ -122,7 +122,7 @@ def make_phantom(voxel_mm: float = 0.5, *, glass_radius_mm: float = 8.0, n_marke
         occ_marker = np.zeros_like(occ_glass)
         streaks = np.zeros_like(occ_glass)
         for c, r in zip(centres, radii):
-            if abs(z - c[2]) > extent:
+            if abs(z - c[2]) > max(3 * r, r + voxel_mm):  # marker and streaks are nil beyond
                 continue
             d_m = np.sqrt((x - c[0]) ** 2 + (y - c[1]) ** 2 + (z - c[2]) ** 2) - r
             occ_marker = np.maximum(occ_marker, np.clip(0.5 - d_m / voxel_mm, 0, 1))
