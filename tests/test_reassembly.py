@@ -167,6 +167,26 @@ def test_glass_mesh_is_close_to_the_true_surface(phantom, meshed):
         phantom.glass_radius_mm + phantom.marker_radii_mm.max()
 
 
+def test_meshing_of_a_thin_walled_mesh_phantom():
+    """A glass tube with 3 mm walls (a mesh phantom, as the bowl of scenes/default): markers
+    found, the cleaned mesh closed and near the true surface."""
+    from abs.reassembly.phantom import mesh_distance
+
+    tube = trimesh.creation.annulus(r_min=6, r_max=9, height=8, sections=64)
+    probe = np.array([[0.0, 0.0, 0.0], [7.5, 0.0, 0.0], [12.0, 0.0, 0.0], [0.0, 9.0, 2.0]])
+    np.testing.assert_allclose(mesh_distance(tube, probe), [6.0, -1.5, 3.0, 0.0], atol=0.05)
+    phantom = make_phantom(VOXEL, glass_mesh_mm=tube, n_markers=5, marker_gap_mm=6, seed=0)
+    result = mesh_volume(phantom.volume, MeshingSettings(rounds=1))
+    assert len(result.markers) == 5
+    idx = _nearest(phantom.marker_centres_mm, result.centres_mm)
+    assert len(set(idx)) == 5
+    assert np.linalg.norm(result.centres_mm - phantom.marker_centres_mm[idx], axis=1).max() < 0.3 * VOXEL
+    assert result.glass.is_watertight
+    pts, _ = trimesh.sample.sample_surface(result.glass, 20000, seed=0)
+    d = phantom.glass_distance_mm(pts)
+    assert d.mean() < 0.5 * VOXEL and np.percentile(d, 95) < 1.0 * VOXEL, (d.mean(), np.percentile(d, 95))
+
+
 def test_volume_without_markers_is_refused():
     plain = make_phantom(VOXEL, n_markers=0 + 1, marker=0.0, streak=0.0, seed=1)
     with pytest.raises(InputError, match="no markers"):

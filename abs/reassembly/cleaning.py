@@ -2,7 +2,8 @@
 holes, decimate (quadric edge collapse) and √3-subdivide.
 
 Quadric decimation is Fast-Quadric-Mesh-Simplification through the ``fast-simplification``
-package (trimesh's own ``simplify_quadric_decimation`` backend). √3 subdivision (Kobbelt 2000)
+package (trimesh's own ``simplify_quadric_decimation`` backend); a closed mesh it would open (the
+two sides of a thin wall collapsed together) is decimated less. √3 subdivision (Kobbelt 2000)
 is not offered by trimesh (midpoint and Loop only) nor by the other installed libraries, so it is
 written here in numpy: one centroid per face, old vertices relaxed with
 ``alpha_n = (4 - 2 cos(2 pi / n)) / 9``, then every old edge flipped. Faces touching a boundary
@@ -100,19 +101,27 @@ def fill_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 def decimate(mesh: trimesh.Trimesh, keep: float | None = None, *,
-             faces: int | None = None) -> trimesh.Trimesh:
-    """Quadric edge-collapse decimation to ``keep`` of the faces (or to ``faces`` faces)."""
+             faces: int | None = None, keep_closed: bool = True) -> trimesh.Trimesh:
+    """Quadric edge-collapse decimation to ``keep`` of the faces (or to ``faces`` faces).
+
+    With ``keep_closed``, a closed input that the decimation would open or make non-manifold
+    (collapsing the two sides of a wall thinner than the new edges onto each other) is decimated
+    again to 1.5 times as many faces, until the result is closed (or nothing is removed).
+    """
     import fast_simplification
 
     target = faces if faces is not None else int(round(keep * len(mesh.faces)))
     target = max(4, min(int(target), len(mesh.faces)))
-    if target >= len(mesh.faces):
-        return mesh
-    v, f = fast_simplification.simplify(np.asarray(mesh.vertices, np.float64),
-                                        np.asarray(mesh.faces, np.int64), target_count=target)
-    out = trimesh.Trimesh(v, f, process=False)
-    out.remove_unreferenced_vertices()
-    return out
+    closed = keep_closed and mesh.is_watertight
+    while target < len(mesh.faces):
+        v, f = fast_simplification.simplify(np.asarray(mesh.vertices, np.float64),
+                                            np.asarray(mesh.faces, np.int64), target_count=target)
+        out = trimesh.Trimesh(v, f, process=False)
+        out.remove_unreferenced_vertices()
+        if not closed or out.is_watertight:
+            return out
+        target = int(1.5 * target) + 1
+    return mesh
 
 
 def sqrt3_subdivide(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -1,5 +1,5 @@
-"""A synthetic CT volume whose truth is known: a glass sphere with small spherical markers glued
-on its surface, density noise and beam-hardening streaks along one axis around the markers.
+"""A synthetic CT volume whose truth is known: a glass sphere (or a glass mesh, e.g. the bowl of
+``scenes/default``) with small spherical markers glued on its surface, density noise and beam-hardening streaks along one axis around the markers.
 
 The streaks make glass next to a marker as dense as a marker, and air next to a marker as dense
 as glass, so no single threshold separates glass from markers: the marker threshold picks up
@@ -8,7 +8,9 @@ in air (which carving and keeping the largest piece remove).
 
 Densities are grey values (``uint16``): air ``air``, glass ``air + glass``, markers
 ``air + marker``. Partial volume is modelled by a linear ramp of the signed distance over one
-voxel, exact enough for spheres.
+voxel; for a mesh the signed distance is exact within 1.5 voxels of its surface (nearest
+triangle, the sign from its normal) and the inside elsewhere comes from the connected pieces of
+the rest of the grid.
 """
 
 from __future__ import annotations
@@ -16,10 +18,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
+from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from abs.reassembly.volume import Volume
 
-__all__ = ["Phantom", "make_phantom", "random_directions"]
+__all__ = ["Phantom", "make_phantom", "random_directions", "mesh_distance"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +43,9 @@ class Phantom:
         ``(n, 3)`` marker centres.
     marker_radii_mm : np.ndarray
         ``(n,)`` marker radii.
+    glass_mesh_mm : trimesh.Trimesh or None
+        The true glass surface when the glass is a mesh (then ``glass_radius_mm`` is ``nan`` and
+        ``glass_centre_mm`` its bounding-box centre).
     """
 
     volume: Volume
@@ -45,9 +53,12 @@ class Phantom:
     glass_radius_mm: float
     marker_centres_mm: np.ndarray
     marker_radii_mm: np.ndarray
+    glass_mesh_mm: trimesh.Trimesh | None = None
 
     def glass_distance_mm(self, points_mm: np.ndarray) -> np.ndarray:
         """Unsigned distance of points (mm) from the true glass surface, mm."""
+        if self.glass_mesh_mm is not None:
+            return np.abs(mesh_distance(self.glass_mesh_mm, points_mm))
         d = np.linalg.norm(np.asarray(points_mm) - self.glass_centre_mm, axis=-1)
         return np.abs(d - self.glass_radius_mm)
 
@@ -66,12 +77,77 @@ def random_directions(n: int, rng: np.random.Generator, min_angle: float = 0.5) 
     raise ValueError(f"cannot place {n} markers {min_angle} rad apart")
 
 
+def mesh_distance(mesh: trimesh.Trimesh, points: np.ndarray, k: int = 32,
+                  chunk: int = 100_000) -> np.ndarray:
+    """Signed distance of points from a closed mesh (positive outside), exact where the nearest
+    triangle is among the ``k`` with the nearest centroids (always, for points near a mesh whose
+    triangles are not much larger than the gaps between its sheets). The sign is that of the
+    nearest triangle's normal."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    tree = cKDTree(mesh.triangles_center)
+    tris = np.asarray(mesh.triangles)
+    normals = np.asarray(mesh.face_normals)
+    k = min(k, len(tris))
+    out = np.empty(len(pts))
+    for s in range(0, len(pts), chunk):
+        p = pts[s:s + chunk]
+        _, idx = tree.query(p, k=k)
+        idx = idx.reshape(len(p), k)
+        q = trimesh.triangles.closest_point(tris[idx.ravel()], np.repeat(p, k, axis=0)).reshape(len(p), k, 3)
+        d = np.linalg.norm(q - p[:, None], axis=2)
+        best = d.argmin(axis=1)
+        rows = np.arange(len(p))
+        q_best = q[rows, best]
+        side = np.einsum("ij,ij->i", p - q_best, normals[idx[rows, best]])
+        out[s:s + chunk] = np.where(side < 0, -1.0, 1.0) * d[rows, best]
+    return out
+
+
+def _mesh_occupancy(mesh: trimesh.Trimesh, shape: tuple[int, int, int], voxel: float) -> np.ndarray:
+    """Partial-volume occupancy ``[k, j, i]`` of a closed mesh (mm, volume frame)."""
+    samples, _ = trimesh.sample.sample_surface(mesh, int(8 * mesh.area / voxel ** 2) + 1000, seed=0)
+    samples = np.concatenate([samples, mesh.vertices])
+    k, j, i = np.indices(shape)
+    centres = np.stack([i.ravel(), j.ravel(), k.ravel()], axis=1) * voxel
+    near, _ = cKDTree(samples).query(centres, distance_upper_bound=1.5 * voxel)
+    band = np.isfinite(near)
+    occ = np.zeros(len(centres), dtype=np.float32)
+    d = mesh_distance(mesh, centres[band])
+    occ[band] = np.clip(0.5 - d / voxel, 0, 1)
+    labels, _ = ndimage.label(~band.reshape(shape))
+    border = np.unique(np.concatenate([labels[[0, -1]].ravel(), labels[:, [0, -1]].ravel(),
+                                       labels[:, :, [0, -1]].ravel()]))
+    inside = (labels > 0) & ~np.isin(labels, border)
+    occ[inside.ravel()] = 1.0
+    return occ.reshape(shape)
+
+
+def _surface_markers(mesh: trimesh.Trimesh, radii: np.ndarray, embed: float, min_gap: float,
+                     rng: np.random.Generator) -> np.ndarray:
+    """Marker centres ``embed * r`` off random surface points, at least ``min_gap`` apart and
+    clear of every other sheet of the surface (a thin wall's other side)."""
+    out: list[np.ndarray] = []
+    for _ in range(100000):
+        r = radii[len(out)]
+        p, f = trimesh.sample.sample_surface(mesh, 1, seed=int(rng.integers(2 ** 31)))
+        c = p[0] + embed * r * mesh.face_normals[f[0]]
+        if any(np.linalg.norm(c - e) < min_gap for e in out):
+            continue
+        if abs(mesh_distance(mesh, c[None])[0] - embed * r) > 1e-6:
+            continue  # another part of the surface lies nearer than the one it is glued on
+        out.append(c)
+        if len(out) == len(radii):
+            return np.array(out)
+    raise ValueError(f"cannot place {len(radii)} markers {min_gap} mm apart")
+
+
 def make_phantom(voxel_mm: float = 0.5, *, glass_radius_mm: float = 8.0, n_markers: int = 6,
                  marker_radius_mm: float | tuple[float, float] = 1.5, embed: float = 0.5,
                  air: float = 200.0, glass: float = 1000.0, marker: float = 4000.0,
                  noise_sd: float = 40.0, streak: float = 2500.0, streak_length: float = 0.6,
-                 streak_width: float = 0.35, margin_mm: float = 2.0, seed: int = 0) -> Phantom:
-    """Simulate a CT scan of a glass sphere with markers.
+                 streak_width: float = 0.35, margin_mm: float = 2.0, seed: int = 0,
+                 glass_mesh_mm: trimesh.Trimesh | None = None, marker_gap_mm: float = 10.0) -> Phantom:
+    """Simulate a CT scan of a glass sphere (or of a glass mesh) with markers.
 
     Parameters
     ----------
@@ -98,6 +174,10 @@ def make_phantom(voxel_mm: float = 0.5, *, glass_radius_mm: float = 8.0, n_marke
         Air around the object, mm.
     seed : int
         Random seed (marker layout, radii, noise).
+    glass_mesh_mm : trimesh.Trimesh, optional
+        A closed glass mesh in mm (e.g. ``scenes/default/bowl.ply`` scaled by 1000) instead of
+        the sphere; it is moved into the volume (its bounding box centred). Markers go on random
+        surface points, at least ``marker_gap_mm`` apart.
     """
     rng = np.random.default_rng(seed)
     if np.ndim(marker_radius_mm) == 0:
@@ -105,22 +185,37 @@ def make_phantom(voxel_mm: float = 0.5, *, glass_radius_mm: float = 8.0, n_marke
     else:
         lo, hi = marker_radius_mm
         radii = rng.uniform(lo, hi, n_markers)
-    extent = glass_radius_mm + (1 + embed) * radii.max() + margin_mm
-    n = int(np.ceil(2 * extent / voxel_mm)) + 1
-    centre = np.full(3, (n - 1) * voxel_mm / 2)
-    dirs = random_directions(n_markers, rng)
-    centres = centre + dirs * (glass_radius_mm + embed * radii)[:, None]
+    pad = (1 + embed) * radii.max() + margin_mm
+    mesh_occ = None
+    if glass_mesh_mm is None:
+        n = int(np.ceil(2 * (glass_radius_mm + pad) / voxel_mm)) + 1
+        shape = (n, n, n)
+        centre = np.full(3, (n - 1) * voxel_mm / 2)
+        dirs = random_directions(n_markers, rng)
+        centres = centre + dirs * (glass_radius_mm + embed * radii)[:, None]
+    else:
+        lo, hi = glass_mesh_mm.bounds
+        nx, ny, nz = (np.ceil((hi - lo + 2 * pad) / voxel_mm) + 1).astype(int)
+        shape = (int(nz), int(ny), int(nx))
+        centre = (np.array([nx, ny, nz]) - 1) * voxel_mm / 2
+        glass_mesh_mm = glass_mesh_mm.copy()
+        glass_mesh_mm.apply_translation(centre - 0.5 * (lo + hi))
+        glass_radius_mm = float("nan")
+        centres = _surface_markers(glass_mesh_mm, radii, embed, marker_gap_mm, rng)
+        mesh_occ = _mesh_occupancy(glass_mesh_mm, shape, voxel_mm)
 
-    coords = np.arange(n) * voxel_mm
-    x = coords[None, None, :]
-    y = coords[None, :, None]
-    data = np.empty((n, n, n), dtype=np.uint16)
-    for k in range(n):  # slab by slab: a 0.2 mm volume of a large object does not fit as float64
-        z = coords[k]
-        d_glass = np.sqrt((x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2) - glass_radius_mm
-        occ_glass = np.clip(0.5 - d_glass / voxel_mm, 0, 1)
-        occ_marker = np.zeros_like(occ_glass)
-        streaks = np.zeros_like(occ_glass)
+    x = (np.arange(shape[2]) * voxel_mm)[None, None, :]
+    y = (np.arange(shape[1]) * voxel_mm)[None, :, None]
+    data = np.empty(shape, dtype=np.uint16)
+    for k in range(shape[0]):  # slab by slab: a 0.2 mm volume of a large object does not fit as float64
+        z = k * voxel_mm
+        if mesh_occ is None:
+            d_glass = np.sqrt((x - centre[0]) ** 2 + (y - centre[1]) ** 2 + (z - centre[2]) ** 2) - glass_radius_mm
+            occ_glass = np.clip(0.5 - d_glass / voxel_mm, 0, 1)
+        else:
+            occ_glass = np.broadcast_to(mesh_occ[k][None], (1, shape[1], shape[2]))
+        occ_marker = np.zeros(occ_glass.shape)
+        streaks = np.zeros(occ_glass.shape)
         for c, r in zip(centres, radii):
             if abs(z - c[2]) > max(3 * r, r + voxel_mm):  # marker and streaks are nil beyond
                 continue
@@ -134,4 +229,4 @@ def make_phantom(voxel_mm: float = 0.5, *, glass_radius_mm: float = 8.0, n_marke
                  + streaks * (1 - occ_marker) + rng.normal(0, noise_sd, occ_glass.shape))
         data[k] = np.clip(np.rint(value), 0, 65535).astype(np.uint16)
     # Volume frame: (x, y, z) = (i, j, k) * voxel; the arrays above were laid out [k, j, i].
-    return Phantom(Volume(data, voxel_mm), centre, float(glass_radius_mm), centres, radii)
+    return Phantom(Volume(data, voxel_mm), centre, float(glass_radius_mm), centres, radii, glass_mesh_mm)

@@ -2,8 +2,9 @@
 
 The markers are the densest material; the glass threshold only removes air and noise.
 :func:`auto_thresholds` picks both from the histogram: the air and glass levels are the two
-histogram peaks either side of Otsu's threshold, the marker level a high percentile of the
-volume; the glass threshold lies half-way from air to glass, the marker threshold half-way from
+histogram peaks either side of Otsu's threshold, the marker level the median of the volume's
+densest voxels (a fixed count, so that it does not depend on the share of the volume the
+markers fill); the glass threshold lies half-way from air to glass, the marker threshold half-way from
 glass to the marker level.
 """
 
@@ -46,7 +47,7 @@ def _peak(values: np.ndarray, bins: int = 256) -> float:
     return float(0.5 * (edges[i] + edges[i + 1]))
 
 
-def auto_thresholds(volume: Volume, *, marker_percentile: float = 99.99,
+def auto_thresholds(volume: Volume, *, marker_voxels: int = 50,
                     min_marker_contrast: float = 1.5, sample: int = 2_000_000,
                     seed: int = 0) -> Thresholds:
     """Glass and marker thresholds from the volume's histogram.
@@ -55,9 +56,9 @@ def auto_thresholds(volume: Volume, *, marker_percentile: float = 99.99,
     ----------
     volume : Volume
         The scan.
-    marker_percentile : float
-        Percentile of the grey values taken as the marker level (markers fill a small part of
-        the volume; above this percentile lie markers, below it glass, air and streaks).
+    marker_voxels : int
+        The marker level is the median of this many densest voxels (all inside markers when the
+        markers hold a few voxels each).
     min_marker_contrast : float
         The marker level must lie at least this many times as far above air as glass does;
         otherwise the volume has no marker material.
@@ -80,10 +81,12 @@ def auto_thresholds(volume: Volume, *, marker_percentile: float = 99.99,
     t = threshold_otsu(flat)
     air = _peak(flat[flat <= t])
     glass = _peak(flat[flat > t])
-    top = float(np.percentile(np.asarray(volume.data), marker_percentile))
+    every = np.asarray(volume.data).reshape(-1)
+    n_top = min(marker_voxels, every.size)
+    top = float(np.median(np.partition(every, every.size - n_top)[-n_top:]))
     if not (glass > air) or top - air < min_marker_contrast * (glass - air):
         raise InputError(volume.source, "", (
-            f"no markers found: the densest voxels ({marker_percentile:g}th percentile {top:.0f}) "
+            f"no markers found: the densest voxels (median of the {n_top} densest: {top:.0f}) "
             f"are not {min_marker_contrast:g}x as far above air ({air:.0f}) as the glass "
             f"({glass:.0f}); give --marker-threshold if the markers are there"))
     return Thresholds(glass=air + 0.5 * (glass - air), marker=glass + 0.5 * (top - glass),
