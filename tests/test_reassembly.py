@@ -232,6 +232,22 @@ def test_carve_fill_decimate_sqrt3():
     assert abs(len(dec.faces) - 0.33 * len(sub.faces)) <= 4 and dec.is_watertight
 
 
+def test_repair_closes_a_pinched_mesh():
+    """Two closed boxes sharing an edge (4 faces on it) and a duplicated face: repaired into one
+    closed piece."""
+    from abs.reassembly.cleaning import repair_closed
+
+    a = trimesh.creation.box(extents=[1, 1, 1])
+    b = trimesh.creation.box(extents=[1, 1, 1])
+    b.apply_translation([1, 1, 0])  # touches a along the edge x = y = 0.5
+    pinched = trimesh.util.concatenate([a, b])
+    pinched.merge_vertices()
+    pinched = trimesh.Trimesh(pinched.vertices, np.vstack([pinched.faces, pinched.faces[:1]]), process=False)
+    assert not pinched.is_watertight
+    fixed = repair_closed(pinched)
+    assert fixed.is_watertight and fixed.is_winding_consistent and fixed.volume > 0
+
+
 # --- placement ------------------------------------------------------------------------------------
 
 def _scene_markers(ct_m, noise_m, seed=0, drop=0):
@@ -373,3 +389,16 @@ def test_reassemble_commands(tmp_path, phantom, capsys):
     assert main(["reassemble", "place", str(tmp_path / "mesh"), "--measured", str(tmp_path / "measured.json"),
                  "--scene", scene, "--object", "vase", "--pairs", "0:1", "1:2", "--out", str(out)]) == 2
     assert "at least 3" in capsys.readouterr().err
+
+
+def test_reassemble_mesh_reads_a_slice_folder(tmp_path, phantom, capsys):
+    from abs.cli.main import main
+
+    write_slices(tmp_path / "slices", phantom.volume, ".tif")
+    assert main(["reassemble", "mesh", str(tmp_path / "slices"), "--out", str(tmp_path / "m")]) == 2
+    assert "needs the voxel size" in capsys.readouterr().err
+    assert main(["reassemble", "mesh", str(tmp_path / "slices"), "--voxel-size", str(VOXEL),
+                 "--rounds", "0", "--out", str(tmp_path / "m")]) == 0
+    centres, radii = read_markers(tmp_path / "m")
+    idx = _nearest(phantom.marker_centres_mm, centres)
+    assert len(centres) == 6 and np.linalg.norm(centres - phantom.marker_centres_mm[idx], axis=1).max() < 0.3 * VOXEL

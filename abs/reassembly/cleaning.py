@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-__all__ = ["carve_spheres", "largest_component", "fill_holes", "boundary_loops", "decimate",
+__all__ = ["carve_spheres", "largest_component", "fill_holes", "boundary_loops", "decimate", "repair_closed",
            "sqrt3_subdivide", "subdivide_decimate"]
 
 
@@ -104,9 +104,10 @@ def decimate(mesh: trimesh.Trimesh, keep: float | None = None, *,
              faces: int | None = None, keep_closed: bool = True) -> trimesh.Trimesh:
     """Quadric edge-collapse decimation to ``keep`` of the faces (or to ``faces`` faces).
 
-    With ``keep_closed``, a closed input that the decimation would open or make non-manifold
-    (collapsing the two sides of a wall thinner than the new edges onto each other) is decimated
-    again to 1.5 times as many faces, until the result is closed (or nothing is removed).
+    With ``keep_closed``, a closed input that the decimation leaves open or non-manifold (a few
+    pinched edges, typically where a fan of :func:`fill_holes` or a thin wall collapsed) is first
+    repaired (:func:`repair_closed`); if that fails it is decimated again to 1.5 times as many
+    faces, until the result is closed (or nothing is removed).
     """
     import fast_simplification
 
@@ -120,7 +121,30 @@ def decimate(mesh: trimesh.Trimesh, keep: float | None = None, *,
         out.remove_unreferenced_vertices()
         if not closed or out.is_watertight:
             return out
+        out = repair_closed(out)
+        if out.is_watertight:
+            return out
         target = int(1.5 * target) + 1
+    return mesh
+
+
+def repair_closed(mesh: trimesh.Trimesh, passes: int = 3) -> trimesh.Trimesh:
+    """Remove duplicated faces and every face on an edge shared by more than two faces, keep the
+    largest piece and close the holes this leaves; repeated up to ``passes`` times while the mesh
+    is not closed. Returns the last attempt (check ``is_watertight``)."""
+    for _ in range(passes):
+        if mesh.is_watertight:
+            break
+        faces = np.asarray(mesh.faces)
+        key = np.sort(faces, axis=1)
+        _, inverse, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        keep = count[inverse.ravel()] == 1
+        edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        _, e_inv, e_count = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+        keep &= ~(e_count[e_inv.ravel()] > 2).reshape(-1, 3).any(axis=1)
+        mesh = trimesh.Trimesh(mesh.vertices, faces[keep], process=False)
+        mesh.remove_unreferenced_vertices()
+        mesh = fill_holes(largest_component(mesh))
     return mesh
 
 
