@@ -172,6 +172,9 @@ def markdown(data: dict) -> str:
             f"| {g['cleaned_sqrt3_loop']['mean_mm']:.3f} / {g['cleaned_sqrt3_loop']['p95_mm']:.3f} / {g['cleaned_sqrt3_loop']['max_mm']:.2f} "
             f"| {g['cleaned_epsilon_0.75']['mean_mm']:.3f} / {g['cleaned_epsilon_0.75']['p95_mm']:.3f} / {g['cleaned_epsilon_0.75']['max_mm']:.2f} "
             f"| {g['cleaned']['faces']} / {g['cleaned_sqrt3_loop']['faces']} |")
+    open_meshes = [f"{r['glass']} {r['voxel_mm']:g} mm {k}" for r in data["runs"]
+                   for k, g in r["glass_deviation"].items() if not g["watertight"]]
+    lines += ["", "Closed (watertight) meshes: " + ("all" if not open_meshes else "all but " + ", ".join(open_meshes)) + "."]
     lines += ["", "Stage times (s):", ""]
     for r in data["runs"]:
         lines.append(f"- {r['glass']}, {r['voxel_mm']:g} mm: " + ", ".join(f"{k} {v:.2f}" for k, v in r["stage_seconds"].items()))
