@@ -193,6 +193,28 @@ def test_volume_without_markers_is_refused():
         mesh_volume(plain.volume)
 
 
+def test_dense_block_beside_the_markers(phantom):
+    """A dense plate (a clamp, a label) beside the object: every marker is still found, and the
+    spheres RANSAC may fit to the plate's rounded corners (2 to 3 voxels across, as small as the
+    markers) are left unpaired by the placement. (Thresholds by hand: a plate this large would
+    be taken for the glass by the histogram.)"""
+    settings = MeshingSettings(glass_threshold=700, marker_threshold=2700, rounds=0)
+    data = phantom.volume.data.copy()
+    data[1:3, 5:25, 5:25] = 4200  # 1 x 10 x 10 mm, below the glass
+    found = mesh_volume(Volume(data, VOXEL), settings).centres_mm
+    d = np.linalg.norm(found[:, None] - phantom.marker_centres_mm[None], axis=2)
+    assert np.all(d.min(axis=0) < 0.3 * VOXEL)  # every true marker found
+    measured, order, R, t = _scene_markers(phantom.marker_centres_mm * 1e-3, 0.05e-3, seed=2)
+    result = place(measured, found * 1e-3)
+    assert len(result.pairs) == len(measured)
+    np.testing.assert_array_equal(d.argmin(axis=1)[result.pairs[:, 1]], order[result.pairs[:, 0]])
+
+
+def test_no_sphere_in_the_radius_range_is_refused(phantom):
+    with pytest.raises(InputError, match="no markers: no sphere of radius 3 to 5 mm"):
+        mesh_volume(phantom.volume, MeshingSettings(marker_radius_mm=(3.0, 5.0)))
+
+
 def test_marker_threshold_above_every_voxel_is_refused(phantom):
     with pytest.raises(InputError, match="no markers"):
         mesh_volume(phantom.volume, MeshingSettings(glass_threshold=600, marker_threshold=60000))

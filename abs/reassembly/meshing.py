@@ -98,7 +98,8 @@ def mesh_volume(volume: Volume, settings: MeshingSettings = MeshingSettings()) -
     t0 = time.perf_counter()
     th = None
     if settings.glass_threshold is None or settings.marker_threshold is None:
-        th = auto_thresholds(volume)
+        # A marker threshold given by hand overrides the check that the volume has markers.
+        th = auto_thresholds(volume, min_marker_contrast=1.5 if settings.marker_threshold is None else 0.0)
     thresholds = Thresholds(
         glass=settings.glass_threshold if settings.glass_threshold is not None else th.glass,
         marker=settings.marker_threshold if settings.marker_threshold is not None else th.marker,
@@ -119,7 +120,8 @@ def mesh_volume(volume: Volume, settings: MeshingSettings = MeshingSettings()) -
                                             f"{thresholds.marker:g}") from None
     min_inliers = int(max(20, 0.5 * 4 * np.pi * r_min ** 2 / voxel ** 2))
     markers = ransac_spheres(marker_mesh.vertices, tol=0.5 * voxel, r_min=r_min, r_max=r_max,
-                             min_inliers=min_inliers, trials=settings.ransac_trials, seed=settings.seed)
+                             min_inliers=min_inliers, trials=settings.ransac_trials,
+                             density=1 / voxel ** 2, min_coverage=0.6, seed=settings.seed)
     if not markers:
         raise InputError(volume.source, "", (
             f"no markers: no sphere of radius {r_min:g} to {r_max:g} mm among the "
