@@ -325,6 +325,27 @@ def test_fewer_than_three_markers_is_refused(phantom):
         match_markers(np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.2, 0]]), ct)
 
 
+def test_mirrored_volume_is_refused_not_placed():
+    """Slices stored in the opposite order mirror the object: no rigid transform pairs all the
+    measured markers, and placement says so instead of placing a subset."""
+    for seed in range(4):
+        ct = make_phantom(VOXEL, n_markers=7, seed=seed).marker_centres_mm * 1e-3
+        R = Rotation.random(random_state=seed).as_matrix()
+        measured = (ct * [-1, 1, 1]) @ R.T + [0, 0.04, 0]
+        with pytest.raises(InputError, match="mirrored|ambiguous"):
+            place(measured, ct)
+
+
+def test_unpaired_measured_markers_can_be_allowed(phantom):
+    ct = phantom.marker_centres_mm * 1e-3
+    measured, order, R, t = _scene_markers(ct, 0.05e-3, seed=6)
+    extra = np.vstack([measured, [0.5, 0.5, 0.5]])  # a false detection far away
+    with pytest.raises(InputError, match=f"measured marker\\(s\\) {len(measured)} match no CT marker"):
+        place(extra, ct)
+    result = place(extra, ct, allow_unpaired=True)
+    assert len(result.pairs) == len(measured)
+
+
 def test_symmetric_layout_is_refused_not_guessed():
     square = np.array([[0, 0, 0], [0.01, 0, 0], [0.01, 0.01, 0], [0, 0.01, 0]])
     with pytest.raises(InputError, match="ambiguous"):

@@ -50,6 +50,8 @@ def add_parser(sub) -> None:
     q.add_argument("--pairs", nargs="+", metavar="M:C",
                    help="pairing by hand: measured index : CT index (0-based), at least 3")
     q.add_argument("--tol", type=float, default=1.5, help="pairing tolerance, mm")
+    q.add_argument("--allow-unpaired", action="store_true",
+                   help="place even if some measured markers match no CT marker")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
     q.set_defaults(run=_run_place)
 
@@ -123,7 +125,8 @@ def _run_place(args) -> int:
 
     centres_mm, _ = read_markers(args.markers)
     measured = _read_points(args.measured)
-    result = place(measured, centres_mm * 1e-3, _parse_pairs(args.pairs), tol=args.tol * 1e-3)
+    result = place(measured, centres_mm * 1e-3, _parse_pairs(args.pairs), tol=args.tol * 1e-3,
+                   allow_unpaired=args.allow_unpaired)
     folder = args.markers if args.markers.is_dir() else args.markers.parent
     mesh = args.mesh or folder / "glass.ply"
     out = place_object_in_scene(args.scene, args.out, args.object, result.to_world, mesh, args.material)

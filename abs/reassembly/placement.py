@@ -157,7 +157,7 @@ def _describe(pairs) -> str:
 
 
 def place(measured: np.ndarray, ct: np.ndarray, pairs: Sequence[tuple[int, int]] | None = None,
-          tol: float = 1.5e-3) -> Placement:
+          tol: float = 1.5e-3, allow_unpaired: bool = False) -> Placement:
     """Pair (unless ``pairs`` is given) and solve the rigid transform (Kabsch).
 
     Parameters
@@ -170,17 +170,28 @@ def place(measured: np.ndarray, ct: np.ndarray, pairs: Sequence[tuple[int, int]]
         A pairing given by hand; checked, not matched.
     tol : float
         Matching tolerance, metres (see :func:`match_markers`).
+    allow_unpaired : bool
+        Accept an automatic pairing that leaves measured markers unpaired. By default that is
+        an error: every measured marker should be a CT marker, and a mirrored volume (slices in
+        the opposite order) typically pairs only some of them.
 
     Raises
     ------
     InputError
-        Fewer than 3 pairs, indices out of range or used twice, or an automatic pairing that
-        fails (see :func:`match_markers`).
+        Fewer than 3 pairs, indices out of range or used twice, an automatic pairing that
+        fails (see :func:`match_markers`) or that leaves measured markers unpaired.
     """
     measured = np.asarray(measured, dtype=np.float64).reshape(-1, 3)
     ct = np.asarray(ct, dtype=np.float64).reshape(-1, 3)
     if pairs is None:
         pairs = match_markers(measured, ct, tol)
+        unpaired = sorted(set(range(len(measured))) - set(pairs[:, 0].tolist()))
+        if unpaired and not allow_unpaired:
+            raise InputError(None, "markers", (
+                f"measured marker(s) {', '.join(map(str, unpaired))} match no CT marker within "
+                f"{tol * 1e3:g} mm once the other {len(pairs)} are placed: a false detection, or "
+                "a mirrored volume (slices stored in the opposite order); allow unpaired markers "
+                "(--allow-unpaired) or give the pairs by hand"))
     else:
         pairs = np.asarray(pairs, dtype=int).reshape(-1, 2)
         if len(pairs) < 3:
