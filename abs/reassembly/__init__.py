@@ -1,0 +1,13 @@
+"""Reassembly: glass scanned in a CT put back into the scene it was photographed in
+(see docs/reassembly.md).
+
+Volume files (:mod:`.volume`), a synthetic CT phantom with known truth (:mod:`.phantom`),
+thresholds and iso-surfaces (:mod:`.surfaces`), RANSAC sphere fits of the markers
+(:mod:`.spheres`), mesh cleaning: carving, hole filling, decimation, √3 subdivision
+(:mod:`.cleaning`), the whole meshing step (:mod:`.meshing`), marker pairing and Kabsch
+placement (:mod:`.placement`), the placed object written into a scene file (:mod:`.scene_pose`)
+and the soft deformation of a tablecloth under a hard object (:mod:`.deform`).
+
+Units: millimetres in the CT volume and in everything measured in it (marker centres, radii, the
+glass mesh before it is written for a scene); metres in scene files and for triangulated markers.
+"""
