@@ -310,3 +310,17 @@ def test_laplace_flags_only_scalars_in_unresolved_directions():
                    more_pairs=[(jacobian(), jacobian()) for _ in range(3)])
     assert more.identifiable[:2].all()
     np.testing.assert_allclose(more.stderr[:2], approx.stderr[:2], rtol=0.2)
+
+
+def test_monte_carlo_error_of_few_averaged_points_takes_a_wider_scatter():
+    """One arrived point says nothing of the refinement's spread: the scatter comes from the
+    wider set of iterates (conservative), divided by the number actually averaged."""
+    A, y, _ = _linear_problem()
+    approx = laplace(A @ np.linalg.lstsq(A, y, rcond=None)[0] - y, A)
+    rng = np.random.default_rng(5)
+    wide = rng.normal(scale=0.2, size=(8, A.shape[1]))
+    alone = with_monte_carlo_error(approx, wide[-1:])
+    np.testing.assert_allclose(alone.stderr, approx.stderr)  # nothing to scatter: unchanged
+    widened = with_monte_carlo_error(approx, wide[-1:], scatter=wide)
+    expected = np.sqrt(approx.stderr ** 2 + np.var(wide, axis=0, ddof=1))
+    np.testing.assert_allclose(widened.stderr, expected, rtol=1e-9)

@@ -182,9 +182,10 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         seed = settings.seed + 90 - 2 * len(more)
         more.append((problem.jacobian(theta, settings.spp, seed), problem.jacobian(theta, settings.spp, seed - 1)))
         uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more)
-    points = optimiser.averaged_points(state)
+    points, scatter = optimiser.averaged_points(state), optimiser.scatter_points(state)
     if points is not None:
-        uncertainty = with_monte_carlo_error(uncertainty, np.array([vector.to_physical(p) for p in points]))
+        physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
+        uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter))
 
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)
     metrics = {key: {"before": m_before[key], "after": m_after[key]} for key in m_before}

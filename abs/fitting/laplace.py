@@ -51,19 +51,28 @@ def _from_covariance(cov: np.ndarray, pixel_sigma: float, identifiable: np.ndarr
     return LaplaceApproximation(cov, stderr, correlation, pixel_sigma, identifiable)
 
 
-def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray) -> LaplaceApproximation:
+def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
+                          scatter: np.ndarray | None = None) -> LaplaceApproximation:
     """Add the Monte-Carlo error of an estimate that is the mean of ``points`` (n, P).
 
     The refinement's estimate is the mean of iterates that scatter around the solution because
     each step sees a different noisy render; the covariance of that mean,
     ``cov(points) / n``, is added to the Laplace covariance (with fewer than three points only
     its diagonal, a covariance from two points being rank one).
+
+    ``scatter`` (m, P), optional: a larger set of iterates to take the scatter from when few were
+    averaged (one or two arrived points say nothing of their spread; iterates that include some
+    of the approach scatter more, so the error comes out conservative rather than missing).
     """
     points = np.atleast_2d(np.asarray(points, np.float64))
     n = points.shape[0]
-    if n < 2:
+    spread = points
+    if n < 3 and scatter is not None and np.atleast_2d(scatter).shape[0] > n:
+        spread = np.atleast_2d(np.asarray(scatter, np.float64))
+    if spread.shape[0] < 2:
         return approx
-    extra = np.atleast_2d(np.cov(points, rowvar=False)) / n
+    extra = np.atleast_2d(np.cov(spread, rowvar=False)) / n
+    n = spread.shape[0]
     if n < 3:
         extra = np.diag(np.diag(extra))
     return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)

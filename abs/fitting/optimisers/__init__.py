@@ -107,6 +107,11 @@ class Optimiser(abc.ABC):
         of its standard errors; ``None`` when the optimiser does not average."""
         return None
 
+    def scatter_points(self, state: OptimizerState) -> np.ndarray | None:
+        """A larger set of iterates for the Monte-Carlo scatter when :meth:`averaged_points`
+        holds few (see :func:`abs.fitting.laplace.with_monte_carlo_error`); ``None``: use those."""
+        return None
+
 
 def register(name: str):
     """Class decorator: register an :class:`Optimiser` subclass under ``name`` (its file's

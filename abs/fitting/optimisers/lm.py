@@ -139,6 +139,13 @@ class LevenbergMarquardt(Optimiser):
             return None
         return averaged_refinement_points(refinement.points, refinement.clipped)
 
+    def scatter_points(self, state: OptimizerState) -> np.ndarray | None:
+        refinement = (state.solver or LMState()).refinement
+        if not refinement.points:
+            return None
+        # All but the first quarter, arrived or not.
+        return averaged_refinement_points(refinement.points)
+
 
 def lm_stages(settings) -> list[tuple[int, int]]:
     """Levenberg-Marquardt's coarse-to-fine stages: ``(downsampling factor, last evaluation)``.
