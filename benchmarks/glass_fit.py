@@ -76,8 +76,9 @@ def mitsuba_photograph(compiled, camera, spp: int, seed: int) -> np.ndarray:
     for obj in compiled.scene.objects:
         if obj.material == "glass" and peak > 0:
             # RGB sigma_t above 1 is refused in a scene dictionary: scale carries the magnitude.
-            d[obj.name]["interior"] = {"type": "homogeneous", "albedo": 0.0, "scale": peak,
-                                       "sigma_t": {"type": "rgb", "value": (sigma / peak).tolist()}}
+            d[compiled.shape_ids[obj.name]]["interior"] = {
+                "type": "homogeneous", "albedo": 0.0, "scale": peak,
+                "sigma_t": {"type": "rgb", "value": (sigma / peak).tolist()}}
     d["integrator"] = {"type": "volpath", "max_depth": compiled.scene.render.max_depth}
     w, h = camera.width, camera.height
     to_world = np.eye(4)

@@ -31,7 +31,7 @@ from abs.fitting.jax_bridge import on_calling_thread, residual_function
 from abs.fitting.optimisers import Callback, Optimiser, OptimizerState, register
 
 __all__ = ["LevenbergMarquardt", "LMState", "RefinementState", "levenberg_marquardt",
-           "gauss_newton_refinement", "cross_curvature", "averaged_refinement_points"]
+           "gauss_newton_refinement", "cross_curvature", "averaged_refinement_points", "lm_stages"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,7 +53,7 @@ class RefinementState:
 
     points: tuple = ()
     clipped: tuple = ()
-    radius: float | None = None
+    radius: np.ndarray | None = None
     step: np.ndarray | None = None
 
 
