@@ -80,3 +80,11 @@ def test_separable_channels_share_one_forward_render(scene, name):
         np.testing.assert_allclose(together[..., c], alone[..., c], rtol=1e-4,
                                    atol=1e-5 * np.abs(alone).max())
         assert np.abs(alone[..., [k for k in range(3) if k != c]]).max() <= 1e-6 * np.abs(alone).max()
+
+
+def test_forward_renders_counts_the_difference_renders(scene):
+    """Render accounting: an IOR's Jacobian pass renders at p and p +- h (three renders)."""
+    compiled, _, _ = scene
+    assert compiled.forward_renders({"glass.absorption": np.ones(3), "glass.ior": np.zeros(3)}) == 1
+    assert compiled.forward_renders({"glass.ior": np.ones(3)}) == 3
+    assert compiled.forward_renders({"glass.ior": np.ones(3)}, differences=False) == 1

@@ -20,7 +20,8 @@ class RenderCounter:
     Attributes
     ----------
     renders : int
-        Primal, forward-mode and reverse-mode renders of one view (each counts once).
+        Primal, forward-mode and reverse-mode renders of one view (each counts once; a Jacobian
+        pass of an IOR counts its three renders, see ``CompiledScene.forward_renders``).
     samples : int
         Camera samples traced: ``width * height * spp`` summed over the renders.
     """

@@ -184,10 +184,11 @@ class FitProblem:
             # Every pass renders with the same seed (the same samples), and every fitted
             # parameter is given a tangent (zero where not wanted), so that every column is
             # rendered alike (e.g. dispersive glass splits its paths in each).
+            tangents = self.vector.tangents(tangent)
             rendered, derivative = self.compiled.render_forward(
-                cam, self.vector.tangents(tangent), spp=spp, seed=seed,
-                max_depth=self.max_depth)
-            self.counter.add(cam, spp)
+                cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth)
+            for _ in range(self.compiled.forward_renders(tangents)):
+                self.counter.add(cam, spp)
             if image is None:
                 image = rendered.numpy().astype(np.float64)
             derivative = derivative.numpy()
@@ -229,10 +230,11 @@ class FitProblem:
                     # A tied parameter's one scalar moves every channel: the channels' sum.
                     grad[slices[name]] += (np.sum(g[name]) if name in self.vector.tied else g[name])
             for tangent, columns in self.column_passes(moving):
+                tangents = self.vector.tangents(tangent, moving)
                 _, derivative = self.compiled.render_forward(
-                    cam, self.vector.tangents(tangent, moving), spp=spp, seed=view_seed,
-                    max_depth=self.max_depth)
-                self.counter.add(cam, spp)
+                    cam, tangents, spp=spp, seed=view_seed, max_depth=self.max_depth)
+                for _ in range(self.compiled.forward_renders(tangents)):
+                    self.counter.add(cam, spp)
                 derivative = derivative.numpy() * residual
                 for i, channel in columns:
                     grad[i] += float(np.sum(derivative if channel is None else derivative[..., channel]))

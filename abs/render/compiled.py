@@ -365,6 +365,14 @@ class CompiledScene:
             for name in tangents:
                 self.set(name, from_numpy(mi.Float, self.get(name)))
 
+    def forward_renders(self, tangents: dict, differences: bool = True) -> int:
+        """How many renders :meth:`render_forward` makes for ``tangents``: one, or three when a
+        parameter with a ``difference_step`` moves (its render at ``p`` and at ``p +- h``; two
+        when one side leaves the bounds, counted as three). For render accounting."""
+        moved = any(differences and self._spec(n).difference_step is not None
+                    and np.any(np.asarray(t) != 0) for n, t in tangents.items())
+        return 3 if moved else 1
+
     def _central_difference(self, camera: Camera, tangents: dict, spp: int, seed: int,
                             max_depth: int | None, image) -> mi.TensorXf:
         """``d image / d p . tangent`` by central differences with common random numbers, for
