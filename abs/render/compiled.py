@@ -336,9 +336,7 @@ class CompiledScene:
             glass is being differentiated.
         """
         spp = spp or self.scene.render.spp
-        differenced = {n: np.asarray(t, np.float64) for n, t in tangents.items()
-                       if differences and self._spec(n).difference_step is not None
-                       and np.any(np.asarray(t) != 0)}
+        differenced = self._differenced(tangents, differences)
         if differenced:
             traced = {n: t for n, t in tangents.items() if n not in differenced}
             if any(np.any(np.asarray(t) != 0) for t in traced.values()):
@@ -369,9 +367,15 @@ class CompiledScene:
         """How many renders :meth:`render_forward` makes for ``tangents``: one, or three when a
         parameter with a ``difference_step`` moves (its render at ``p`` and at ``p +- h``; two
         when one side leaves the bounds, counted as three). For render accounting."""
-        moved = any(differences and self._spec(n).difference_step is not None
-                    and np.any(np.asarray(t) != 0) for n, t in tangents.items())
-        return 3 if moved else 1
+        return 3 if self._differenced(tangents, differences) else 1
+
+    def _differenced(self, tangents: dict, differences: bool) -> dict:
+        """The tangents that :meth:`render_forward` takes by central differences: nonzero, on
+        parameters with a ``difference_step`` (none when ``differences`` is off)."""
+        if not differences:
+            return {}
+        return {n: np.asarray(t, np.float64) for n, t in tangents.items()
+                if self._spec(n).difference_step is not None and np.any(np.asarray(t) != 0)}
 
     def _central_difference(self, camera: Camera, tangents: dict, spp: int, seed: int,
                             max_depth: int | None, image) -> mi.TensorXf:
