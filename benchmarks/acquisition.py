@@ -578,21 +578,30 @@ def _e2e_fit(scene_path: Path, folder: Path, unit: float, ds: int, truth: dict, 
         "seconds": time.perf_counter() - t1}
 
 
-def part_end_to_end() -> dict:
+def _e2e_setup():
+    """The end-to-end parts' common start: the default scene (path, loaded, compiled), its
+    ``E2E`` views and the true fitted values."""
     from abs import load_scene
-    from abs.acquisition.build import build_capture
     from abs.render import compile_scene
-    from abs.simulate import place_cameras, simulate_capture
+    from abs.simulate import place_cameras
 
-    t0 = time.perf_counter()
-    cfg = E2E
     scene_path = ROOT / "scenes" / "default" / "scene.toml"
     scene = load_scene(scene_path)
     compiled = compile_scene(scene)
-    W, H = cfg["width"], cfg["height"]
-    views = place_cameras(compiled, cfg["views"], W, H)
+    views = place_cameras(compiled, E2E["views"], E2E["width"], E2E["height"])
     truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
              "glass.absorption": compiled.get("glass.absorption").tolist()}
+    return scene_path, scene, compiled, views, truth
+
+
+def part_end_to_end() -> dict:
+    from abs.acquisition.build import build_capture
+    from abs.simulate import simulate_capture
+
+    t0 = time.perf_counter()
+    cfg = E2E
+    scene_path, scene, compiled, views, truth = _e2e_setup()
+    W, H = cfg["width"], cfg["height"]
     gain = cfg["gain_dn_per_s"]
     out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
@@ -626,18 +635,11 @@ def part_end_to_end_superpixel() -> dict:
     downsample 1, with the same settings and start. Also refits the bilinear build at downsample 2
     (``built_from_raw_downsample2``'s fit, the same 64x48 fitted resolution) as a check that the
     data and fit reproduce the ``end_to_end`` part's."""
-    from abs import load_scene
     from abs.acquisition.build import build_capture
-    from abs.render import compile_scene
-    from abs.simulate import place_cameras
 
     t0 = time.perf_counter()
     cfg = E2E
-    scene_path = ROOT / "scenes" / "default" / "scene.toml"
-    compiled = compile_scene(load_scene(scene_path))
-    views = place_cameras(compiled, cfg["views"], cfg["width"], cfg["height"])
-    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
-             "glass.absorption": compiled.get("glass.absorption").tolist()}
+    scene_path, _, compiled, views, truth = _e2e_setup()
     out: dict = {"config": "as end_to_end; build demosaic superpixel", "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -665,20 +667,13 @@ def part_end_to_end_replicates() -> dict:
     downsample 1 and 2, the bilinear build at downsample 1 and 2 and the superpixel build at
     downsample 1. Per variant: each replicate's errors and their mean and standard deviation
     across replicates (run-to-run spread, to set beside the fits' Laplace standard errors)."""
-    from abs import load_scene
     from abs.acquisition.build import build_capture
-    from abs.render import compile_scene
-    from abs.simulate import place_cameras, simulate_capture
+    from abs.simulate import simulate_capture
 
     t0 = time.perf_counter()
     cfg = E2E
-    scene_path = ROOT / "scenes" / "default" / "scene.toml"
-    scene = load_scene(scene_path)
-    compiled = compile_scene(scene)
+    scene_path, scene, compiled, views, truth = _e2e_setup()
     W, H = cfg["width"], cfg["height"]
-    views = place_cameras(compiled, cfg["views"], W, H)
-    truth = {"environment.scale": float(compiled.get("environment.scale")[0]),
-             "glass.absorption": compiled.get("glass.absorption").tolist()}
     gain = cfg["gain_dn_per_s"]
     variants = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
                 ("built_from_raw", "bilinear", gain, 1),
@@ -723,21 +718,17 @@ def part_end_to_end_exr() -> dict:
     one linear EXR frame per view (noise as ``abs simulate``'s), undistorted by ``build_capture``
     and fitted at downsample 1. Separates the demosaic's share of the absorption bias from the
     resampling's (distortion simulated at 2x, then undistortion)."""
-    from abs import load_scene
     from abs.acquisition.build import build_capture
     from abs.acquisition.camera_file import CameraModel, write_camera_file
     from abs.fitting import FitSettings, fit
     from abs.io.images import write_exr
-    from abs.render import Camera, compile_scene
-    from abs.simulate import add_sensor_noise, place_cameras
+    from abs.render import Camera
+    from abs.simulate import add_sensor_noise
 
     t0 = time.perf_counter()
     cfg = E2E
-    scene_path = ROOT / "scenes" / "default" / "scene.toml"
-    scene = load_scene(scene_path)
-    compiled = compile_scene(scene)
+    scene_path, _, compiled, views, _ = _e2e_setup()
     W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
-    views = place_cameras(compiled, cfg["views"], W, H)
     dist = np.array(cfg["distortion"])
     truth_abs = compiled.get("glass.absorption").copy()
     rng = np.random.default_rng(3)
