@@ -238,15 +238,19 @@ def main() -> None:
     # Derivatives, in primal renders of the same view and spp (distinct IORs: dispersive glass).
     spp_d = 16
     t_primal = _time(lambda: compiled.render(camera, spp=spp_d).numpy())
-    t_column = _time(lambda: compiled.render_forward(camera, {"glass.ior": [1.0, 0.0, 0.0],
-                                                              "glass.absorption": [0.0, 0.0, 0.0]},
-                                                     spp=spp_d)[1].numpy())
+    # Forward mode proper (differences=False); an IOR's fitted column is central differences
+    # (three primal renders by construction), timed beside it.
+    column = {"glass.ior": [1.0, 0.0, 0.0], "glass.absorption": [0.0, 0.0, 0.0]}
+    t_column = _time(lambda: compiled.render_forward(camera, column, spp=spp_d,
+                                                     differences=False)[1].numpy())
+    t_difference = _time(lambda: compiled.render_forward(camera, column, spp=spp_d)[1].numpy())
     weights = np.random.default_rng(0).uniform(-1, 1, (h, w, 3))
     t_gradient = _time(lambda: compiled.render_backward(camera, weights, ["glass.absorption",
                                                                           "environment.scale"], spp=spp_d))
     record["derivatives"] = {"width": w, "height": h, "spp": spp_d, "primal_s": t_primal,
                              "jacobian_column_s": t_column, "gradient_s": t_gradient,
                              "jacobian_column_over_primal": t_column / t_primal,
+                             "ior_difference_column_over_primal": t_difference / t_primal,
                              "gradient_over_primal": t_gradient / t_primal}
     print(f"derivatives {w}x{h} {spp_d} spp: primal {t_primal:.3f} s, Jacobian column "
           f"{t_column / t_primal:.2f}x, gradient {t_gradient / t_primal:.2f}x", flush=True)
