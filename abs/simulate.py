@@ -11,6 +11,7 @@ from typing import Callable
 import numpy as np
 
 from abs.camera.pinhole import intrinsics_from_fov, look_at
+from abs.errors import read_json
 from abs.scene.scene import Scene
 
 __all__ = ["place_cameras", "simulate_capture", "add_sensor_noise", "read_truth"]
@@ -114,5 +115,5 @@ def read_truth(capture: str | Path, names) -> dict[str, list] | None:
     path = Path(capture) / "simulation.json"
     if not path.exists():
         return None
-    known = json.loads(path.read_text()).get("truth", {})
+    known = read_json(path, what="simulation record").get("truth", {})
     return {n: known[n] for n in names if n in known} or None

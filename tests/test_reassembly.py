@@ -87,7 +87,7 @@ def test_missing_and_malformed_headers(tmp_path):
     with pytest.raises(InputError, match="not found"):
         read_volume(tmp_path / "nothing.json")
     (tmp_path / "h.json").write_text("{not json")
-    with pytest.raises(InputError, match="not a JSON header"):
+    with pytest.raises(InputError, match="h.json: not valid JSON"):
         read_raw_volume(tmp_path / "h.json")
     (tmp_path / "h.json").write_text(json.dumps({"file": "x.raw", "shape": [1, 1, 1], "dtype": "uint16"}))
     with pytest.raises(InputError) as exc:

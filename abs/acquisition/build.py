@@ -26,7 +26,6 @@ pixels that fall outside the original frame are left out) and written as the vie
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -41,7 +40,7 @@ from abs.acquisition.hdr import MergedHDR, merge_brackets
 from abs.acquisition.raw import read_raw
 from abs.acquisition.undistort import (pinhole_K, superpixel_camera, undistort_image,
                                        undistort_mask)
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 from abs.io.capture import Capture, save_capture
 from abs.io.images import read_image, read_mask
 
@@ -150,14 +149,9 @@ def build_capture(build_file: str | Path, out: str | Path,
         The merge of each view (weight maps for the report).
     """
     source = Path(build_file)
-    try:
-        spec = json.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(source, "", "no such build file") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(source, "", f"not valid JSON: {exc.msg} at line {exc.lineno}") from exc
+    spec = read_json(source, what="build file")
     folder = source.parent
-    if not isinstance(spec, dict) or "cameras" not in spec or "views" not in spec:
+    if "cameras" not in spec or "views" not in spec:
         raise InputError(source, "", "expected an object with 'cameras' and 'views'")
     cameras = read_camera_file(folder / spec["cameras"])
     cfa = spec.get("cfa_pattern")

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 
 __all__ = ["CameraModel", "read_camera_file", "write_camera_file", "FORMAT_NAME"]
 
@@ -112,13 +112,8 @@ def _parse_camera(entry: Any, source: Path, where: str) -> CameraModel:
 def read_camera_file(path: str | Path) -> dict[str, CameraModel]:
     """Read a camera file; errors name the file and the field (``cameras.left.K``)."""
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(path, "", "no such camera file") from None
-    except json.JSONDecodeError as exc:
-        raise InputError(path, "", f"not valid JSON: {exc.msg} at line {exc.lineno}") from exc
-    if not isinstance(data, dict) or data.get("format") != FORMAT_NAME:
+    data = read_json(path, what="camera file")
+    if data.get("format") != FORMAT_NAME:
         raise InputError(path, "format", f"expected \"{FORMAT_NAME}\" (a camera file written by "
                                          "abs calibrate)")
     if data.get("version") != 1:

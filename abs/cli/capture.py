@@ -26,16 +26,15 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    import json
-
     from tqdm import tqdm
 
     from abs.acquisition.build import build_capture
     from abs.acquisition.figures import write_weight_png
+    from abs.errors import read_json
 
-    spec = json.loads(args.build_file.read_text(encoding="utf-8")) if args.build_file.is_file() \
-        else {}
-    total = len(spec.get("views", [])) if isinstance(spec, dict) else None
+    # Read first only to size the progress bar; a bad file fails here with build_capture's error.
+    views = read_json(args.build_file, what="build file").get("views")
+    total = len(views) if isinstance(views, list) else None
     with tqdm(total=total, desc="build", unit="view") as bar:
         capture, merges = build_capture(args.build_file, args.out, progress=bar.update,
                                         demosaic=args.demosaic)

@@ -8,7 +8,6 @@ root-polynomial correction, refines it by ΔE00 and writes the correction file
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 
@@ -44,15 +43,10 @@ def _patches_file(path: Path):
     import numpy as np
 
     from abs.colour.chart import check_patches
-    from abs.errors import InputError
+    from abs.errors import InputError, read_json
 
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputError(path, "", "no such file") from exc
-    except json.JSONDecodeError as exc:
-        raise InputError(path, "", f"not JSON: {exc}") from exc
-    if not isinstance(doc, dict) or "rgb" not in doc:
+    doc = read_json(path, what="patch file")
+    if "rgb" not in doc:
         raise InputError(path, "rgb", "missing: expected 24 rows [R, G, B] of linear camera RGB")
     try:
         rgb = np.array(doc["rgb"], dtype=np.float64)

@@ -79,20 +79,13 @@ def run_unwrap(args) -> int:
 
 
 def _triangulate(path: Path, capture):
-    import json
-
     import numpy as np
 
-    from abs.errors import InputError
+    from abs.errors import InputError, read_json
     from abs.probe import triangulate_ball
 
-    try:
-        doc = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise InputError(path, "", "no such file") from exc
-    except json.JSONDecodeError as exc:
-        raise InputError(path, "", f"not JSON: {exc}") from exc
-    if not isinstance(doc, dict) or len(doc) < 2:
+    doc = read_json(path, what="outline file")
+    if len(doc) < 2:
         raise InputError(path, "", "expected {view name: [[u, v], ...]} for at least two views")
     cameras, outlines = [], []
     for name, points in doc.items():

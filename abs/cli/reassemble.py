@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 
 
 def add_parser(sub) -> None:
@@ -89,12 +89,7 @@ def _run_mesh(args) -> int:
 
 
 def _read_points(path: Path) -> np.ndarray:
-    if not path.is_file():
-        raise InputError(path, "", "measured marker file not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, "", f"not JSON: {exc}") from None
+    data = read_json(path, what="measured marker file", expect=(dict, list))
     points = data.get("points_m") if isinstance(data, dict) else data
     try:
         arr = np.asarray(points, dtype=np.float64)

@@ -54,19 +54,12 @@ def _paper_tables(path: Path | None) -> Path | None:
 
 
 def run_paper(args) -> int:
-    import json
-
-    from abs.errors import InputError
+    from abs.errors import InputError, read_json
     from abs.studies.sl_paper import read_paper_tables
     from abs.studies.sl_report import paper_markdown
 
-    if not args.study.is_file():
-        raise InputError(args.study, "--study", "file not found")
-    try:
-        summary = json.loads(args.study.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise InputError(args.study, "", f"not JSON: {error}") from None
-    if not isinstance(summary, dict) or not isinstance(summary.get("table1"), dict) \
+    summary = read_json(args.study, what="study summary (study.json)", field="--study")
+    if not isinstance(summary.get("table1"), dict) \
             or not isinstance(summary.get("table2"), dict):
         raise InputError(args.study, "table1", "not a study.json (needs the objects table1 and table2)")
     path = _paper_tables(args.paper_tables)

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from abs.colour.correction import OUTPUT_SPACES, ColourCorrection
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 
 __all__ = ["FORMAT", "TERMS", "correction_to_dict", "write_correction", "read_correction"]
 
@@ -77,13 +77,8 @@ def _matrix(doc: dict, key: str, shape: tuple[int, int], source: str) -> np.ndar
 def read_correction(path: str | Path) -> ColourCorrection:
     """Read a correction file; errors name the file and field."""
     source = str(path)
-    try:
-        doc = json.loads(Path(path).read_text())
-    except FileNotFoundError as exc:
-        raise InputError(source, "", "no such file") from exc
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(source, "", f"not JSON: {exc}") from exc
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+    doc = read_json(path, what="colour correction file")
+    if doc.get("format") != FORMAT:
         raise InputError(source, "format", f"expected {FORMAT!r}")
     degree = doc.get("degree")
     if degree not in TERMS:

@@ -21,7 +21,6 @@ contract, see ``docs/diagnosis.md``). Storage, progress and the report are the c
 
 from __future__ import annotations
 
-import json
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -35,7 +34,7 @@ from abs.diagnosis.localise import Region, ResidualMap, breakdown, find_regions,
 from abs.diagnosis.model import extend_scene
 from abs.diagnosis.score import CandidateScore, score_candidates
 from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 from abs.fitting import FitSettings
 from abs.runs.files import write_json
 
@@ -165,10 +164,7 @@ class _SavedShortFits(dict):
         super().__init__()
         self.path = path
         if resume and path.exists():
-            try:
-                self.update(json.loads(path.read_text()))
-            except (json.JSONDecodeError, TypeError, ValueError) as exc:
-                raise InputError(path, "", f"not readable ({exc}); delete it to start over") from None
+            self.update(read_json(path, what="short-fit record", hint="delete it to start over"))
 
     def __setitem__(self, key: str, value: dict) -> None:
         super().__setitem__(key, value)

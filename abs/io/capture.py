@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from abs.errors import CaptureError, InputError
+from abs.errors import CaptureError, InputError, read_json
 from abs.io.images import (IMAGE_EXTENSIONS, image_size, read_image, read_mask, write_exr,
                            write_mask)
 
@@ -311,18 +311,8 @@ def load_capture(folder: str | Path) -> Capture:
     else:
         source, folder = path / CAMERAS_FILE, path
     folder = folder.absolute()
-    if not source.is_file():
-        raise CaptureError(source, "", "no such file (a capture folder needs cameras.json)")
-    try:
-        data = json.loads(source.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise CaptureError(source, "", f"not valid JSON: {exc.msg} at line {exc.lineno}, "
-                                       f"column {exc.colno}") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CaptureError(source, "", f"cannot read: {exc}") from exc
-    if not isinstance(data, dict):
-        raise CaptureError(source, "", f"expected a JSON object with a 'views' list, got "
-                                       f"{type(data).__name__}")
+    data = read_json(source, what="capture file", hint=f"a capture folder needs {CAMERAS_FILE}, "
+                     "a JSON object with a 'views' list", error=CaptureError)
     views = data.get("views")
     if not isinstance(views, list) or not views:
         raise CaptureError(source, "views", f"expected a non-empty list of views, got {views!r}")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 from abs.reassembly.cleaning import (carve_spheres, decimate, fill_holes, largest_component,
                                      subdivide_decimate)
 from abs.reassembly.spheres import SphereFit, ransac_spheres
@@ -185,13 +185,11 @@ def read_markers(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     p = Path(path)
     if p.is_dir():
         p = p / "markers.json"
-    if not p.is_file():
-        raise InputError(p, "", "marker file not found (written by `abs reassemble mesh`)")
+    data = read_json(p, what="marker file", hint="written by `abs reassemble mesh`")
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
         markers = data["markers"]
         centres = np.array([m["centre_mm"] for m in markers], dtype=np.float64).reshape(-1, 3)
         radii = np.array([m.get("radius_mm", np.nan) for m in markers], dtype=np.float64)
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError) as exc:
         raise InputError(p, "markers", f"expected a list of {{centre_mm: [x, y, z], radius_mm}}: {exc}") from None
     return centres, radii

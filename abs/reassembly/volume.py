@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 
 __all__ = ["Volume", "read_volume", "read_raw_volume", "write_raw_volume", "read_slices",
            "write_slices", "DTYPES"]
@@ -85,14 +85,7 @@ def read_raw_volume(header: str | Path) -> Volume:
         file whose size does not match ``shape`` and ``dtype``.
     """
     path = Path(header)
-    if not path.is_file():
-        raise InputError(path, "", "volume header not found")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(path, "", f"not a JSON header: {exc}") from None
-    if not isinstance(meta, dict):
-        raise InputError(path, "", "expected a JSON object")
+    meta = read_json(path, what="volume header")
     for key in ("file", "shape", "dtype", "voxel_size_mm"):
         if key not in meta:
             raise InputError(path, key, "missing")

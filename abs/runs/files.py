@@ -12,7 +12,7 @@ import json
 import os
 from pathlib import Path
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 
 __all__ = ["write_json", "save_checkpoint", "load_checkpoint", "check_identity", "CHECKPOINT_FILE"]
 
@@ -73,11 +73,12 @@ def load_checkpoint(folder: str | Path, identity: dict) -> dict | None:
     path = Path(folder) / CHECKPOINT_FILE
     if not path.exists():
         return None
+    data = read_json(path, what="abs checkpoint", hint="delete it to start over")
     try:
-        data = json.loads(path.read_text())
         saved, state = data["fit"], data["state"]
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise InputError(path, "", f"not a valid abs checkpoint ({exc}); delete it to start over") from None
+    except KeyError as exc:
+        raise InputError(path, str(exc.args[0]), "missing: not an abs checkpoint; delete it to "
+                                                 "start over") from None
     check_identity(path, "fit", saved, identity, "checkpoint was made",
                    "use another --out folder or delete the checkpoint")
     return state

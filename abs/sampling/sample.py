@@ -25,7 +25,7 @@ import emcee
 import h5py
 import numpy as np
 
-from abs.errors import InputError
+from abs.errors import InputError, read_json
 from abs.runs.files import check_identity
 from abs.runs.identity import run_identity
 from abs.sampling.calibration import calibrate_render_noise
@@ -197,10 +197,10 @@ def read_start(fit_json: str | Path, names) -> dict[str, dict]:
     path = Path(fit_json)
     if path.is_dir():
         path = path / "fit.json"
-    try:
-        parameters = json.loads(path.read_text())["parameters"]
-    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise InputError(path, "parameters", f"not a readable fit.json ({exc})") from None
+    parameters = read_json(path, what="fit.json").get("parameters")
+    if not isinstance(parameters, dict):
+        raise InputError(path, "parameters", "missing or not an object: not a fit.json written by "
+                                             "abs fit")
     out = {}
     for name in names:
         entry = parameters.get(name)
