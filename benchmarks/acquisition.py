@@ -12,7 +12,7 @@ Parts (each resumable: a part already in the JSON is skipped unless ``--force``)
   of each patch, the relative spread of its per-exposure rate estimates, and its linearity in
   exposure time (log-log slope; worst deviation from ``merged * t``).
 - ``synthetic_calibration``: a checkerboard rendered with Mitsuba at the poses of
-  tests/test_acquisition_calibration.py (up to 18) through a pinhole, then resampled through a
+  abs.acquisition.synthetic.board_views (up to 18) through a pinhole, then resampled through a
   known K (fx != fy, off-centre principal point) and Brown-Conrady distortion at 3x supersampling,
   area-averaged, blurred, noised and quantised to 8 bits. Error of K (target < 0.5 %) and of the
   distortion's pixel positions over the image (target < 0.1 px where boards were seen).
@@ -56,6 +56,7 @@ from abs.acquisition.hdr import merge_brackets
 from abs.acquisition.intrinsics import calibrate_intrinsics, coverage_map
 from abs.acquisition.raw import read_raw
 from abs.acquisition.stereo import calibrate_stereo, epipolar_errors_px
+from abs.acquisition.synthetic import board_views
 from abs.io.shared_data import shared_data_dir
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -264,26 +265,6 @@ DIST_SYN = np.array([-0.21, 0.09, 0.001, -0.0015, 0.0])
 SIZE_SYN = (320, 240)
 
 
-def _board_poses() -> list[tuple[np.ndarray, np.ndarray]]:
-    """The poses of tests/test_acquisition_calibration.py: a 3x3 grid of image positions, two
-    tilts each, 0.45 m away; those whose corners leave the image are dropped."""
-    obj = BOARD.object_points().astype(np.float64)
-    centre = obj.mean(axis=0)
-    poses, k = [], 0
-    for v in (64, 120, 176):
-        for u in (85, 160, 235):
-            for tilt in (0.4, -0.4):
-                k += 1
-                rvec = np.array([tilt * (k % 3 - 1) + 0.1, tilt, 0.15 * (k % 4 - 1.5)])
-                R = cv2.Rodrigues(rvec)[0]
-                tvec = 0.45 * np.linalg.solve(K_SYN, [u, v, 1.0]) - R @ centre
-                p, _ = cv2.projectPoints(obj, rvec, tvec, K_SYN, DIST_SYN)
-                p = p.reshape(-1, 2)
-                if p.min() >= 1 and p[:, 0].max() <= SIZE_SYN[0] - 2 and p[:, 1].max() <= SIZE_SYN[1] - 2:
-                    poses.append((R, tvec))
-    return poses
-
-
 def _board_texture(px: int = 16) -> np.ndarray:
     """12x9 squares: a 10x7-square chessboard (9x6 inner corners) inside a one-square white
     margin; black 0.04, white 0.85 (linear)."""
@@ -334,20 +315,19 @@ def part_synthetic_calibration(n: int = 3, spp: int = 4, blur_px: float = 0.5,
     rng = np.random.default_rng(5)
     W, H = SIZE_SYN
     f_r, w_r, h_r = render_pinhole_size(K_SYN, DIST_SYN, W, H, n)
-    poses = _board_poses()
+    poses = board_views(BOARD, K_SYN, DIST_SYN, W, H)
     obj = BOARD.object_points().astype(np.float64)
     with tempfile.TemporaryDirectory() as tmp:
         paths, truth = [], []
-        for k, (R, t) in enumerate(poses):
-            pin = render_board(R, t, f_r, w_r, h_r, spp)
+        for k, view in enumerate(poses):
+            pin = render_board(view.R, view.t, f_r, w_r, h_r, spp)
             img = distort_render(pin, f_r, K_SYN, DIST_SYN, W, H, n)
             img = cv2.GaussianBlur(img, (0, 0), blur_px)
             img = img + rng.normal(0, noise, img.shape)
             path = Path(tmp) / f"board{k:02d}.png"
             cv2.imwrite(str(path), np.clip(np.round(img * 255), 0, 255).astype(np.uint8))
             paths.append(path)
-            p, _ = cv2.projectPoints(obj, cv2.Rodrigues(R)[0], t, K_SYN, DIST_SYN)
-            truth.append(p.reshape(-1, 2))
+            truth.append(view.corners)
         det = detect_in_files(paths, BOARD)
     found = det.found
     corner_err = []

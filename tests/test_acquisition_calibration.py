@@ -17,6 +17,7 @@ from abs.acquisition.camera_file import CameraModel, read_camera_file, write_cam
 from abs.acquisition.detection import detect_in_files
 from abs.acquisition.intrinsics import calibrate_intrinsics, coverage_map
 from abs.acquisition.stereo import calibrate_stereo, epipolar_errors_px
+from abs.acquisition.synthetic import board_views
 from abs.acquisition.undistort import pinhole_K, undistort_image
 from abs.errors import InputError
 from abs.io.shared_data import shared_data_dir
@@ -73,24 +74,10 @@ def test_corner_detection_is_subpixel_accurate():
 
 
 def _board_views(noise_px: float, rng: np.random.Generator) -> list[np.ndarray]:
-    """Corners of the board at 18 poses (a 3x3 grid of image positions, two tilts each) through
-    K_TRUE and DIST_TRUE, with Gaussian detection noise; views leaving the frame are dropped, as a
-    detector would."""
-    obj = BOARD.object_points().astype(np.float64)
-    centre = obj.mean(axis=0)
-    views, k = [], 0
-    for v in (64, 120, 176):
-        for u in (85, 160, 235):
-            for tilt in (0.4, -0.4):
-                k += 1
-                rvec = np.array([tilt * (k % 3 - 1) + 0.1, tilt, 0.15 * (k % 4 - 1.5)])
-                R = cv2.Rodrigues(rvec)[0]
-                tvec = 0.45 * np.linalg.solve(K_TRUE, [u, v, 1.0]) - R @ centre
-                p, _ = cv2.projectPoints(obj, rvec, tvec, K_TRUE, DIST_TRUE)
-                p = p.reshape(-1, 2)
-                if p.min() >= 1 and p[:, 0].max() <= 318 and p[:, 1].max() <= 238:
-                    views.append(p + rng.normal(0, noise_px, p.shape))
-    return views
+    """Corners of the board at the 18 poses of :func:`abs.acquisition.synthetic.board_views`
+    through K_TRUE and DIST_TRUE, with Gaussian detection noise."""
+    return [v.corners + rng.normal(0, noise_px, v.corners.shape)
+            for v in board_views(BOARD, K_TRUE, DIST_TRUE, 320, 240)]
 
 
 def test_intrinsics_recover_known_camera_and_flag_outlier():
