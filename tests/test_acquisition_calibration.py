@@ -17,7 +17,7 @@ from abs.acquisition.camera_file import CameraModel, read_camera_file, write_cam
 from abs.acquisition.detection import detect_in_files
 from abs.acquisition.intrinsics import calibrate_intrinsics, coverage_map
 from abs.acquisition.stereo import calibrate_stereo, epipolar_errors_px
-from abs.acquisition.synthetic import board_views
+from abs.acquisition.synthetic import board_images, board_views
 from abs.acquisition.undistort import pinhole_K, undistort_image
 from abs.errors import InputError
 from abs.io.shared_data import shared_data_dir
@@ -33,12 +33,7 @@ def _board_image(H: np.ndarray, size=(320, 240), square_px=40, supersample=4) ->
 
     Drawn ``supersample`` times larger and area-averaged down, as a lens integrates over a pixel.
     """
-    pattern = np.full((9 * square_px, 12 * square_px), 255, np.uint8)
-    for r in range(7):
-        for c in range(10):
-            if (r + c) % 2 == 0:
-                y0, x0 = (r + 1) * square_px, (c + 1) * square_px
-                pattern[y0:y0 + square_px, x0:x0 + square_px] = 0
+    pattern = BOARD.image(square_px)
     # cv2 maps pixel centres; corner (i, j) of the inner grid is at ((i+2)*s - 0.5, (j+2)*s - 0.5).
     n = supersample
     # Pixel centres: x_big = n * x + (n - 1) / 2, so the large image's homography is A @ H @ ...
@@ -78,6 +73,17 @@ def _board_views(noise_px: float, rng: np.random.Generator) -> list[np.ndarray]:
     through K_TRUE and DIST_TRUE, with Gaussian detection noise."""
     return [v.corners + rng.normal(0, noise_px, v.corners.shape)
             for v in board_views(BOARD, K_TRUE, DIST_TRUE, 320, 240)]
+
+
+def test_synthetic_board_images_put_the_corners_where_the_views_say():
+    """abs.acquisition.synthetic.board_images draws the board where board_views projects it."""
+    views = board_views(BOARD, K_TRUE, DIST_TRUE, 320, 240)[::6]
+    for view, image in zip(views, board_images(BOARD, views, K_TRUE, DIST_TRUE, 320, 240)):
+        corners = detect_corners(image, BOARD)
+        assert corners is not None
+        err = np.linalg.norm(corners - view.corners, axis=1)
+        # Measured: RMS 0.05 to 0.07 px, worst 0.16 px (a corner foreshortened to 8 px squares).
+        assert np.sqrt(np.mean(err ** 2)) < 0.1 and err.max() < 0.25
 
 
 def test_intrinsics_recover_known_camera_and_flag_outlier():

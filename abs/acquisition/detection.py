@@ -82,9 +82,11 @@ def detect_in_files(paths: Sequence[str | Path], board: Board,
             progress(1)
     if all(c is None for c in corners):
         listed = ", ".join(p.name for p in paths[:5]) + (" ..." if len(paths) > 5 else "")
+        check = ("the square count (COLSxROWS), the marker size and the dictionary"
+                 if board.kind == "charuco" else "the inner-corner count (COLSxROWS)")
         raise InputError(paths[0].parent, "images", f"board {board.kind} {board.cols}x"
                                                     f"{board.rows} not found in any of the "
-                                                    f"{len(paths)} images ({listed}); check the "
-                                                    "inner-corner count (COLSxROWS)")
+                                                    f"{len(paths)} images ({listed}); check "
+                                                    f"{check}")
     assert size is not None
     return Detections(paths, corners, size[0], size[1])

@@ -10,6 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from abs.acquisition.board import seen_points
 from abs.errors import InputError
 
 __all__ = ["board_pose"]
@@ -22,7 +23,7 @@ def board_pose(corners: np.ndarray, object_points: np.ndarray, K: np.ndarray,
     Parameters
     ----------
     corners : np.ndarray
-        ``(N, 2)`` detected corners, pixels.
+        ``(N, 2)`` detected corners, pixels; NaN rows (corners not seen) are left out.
     object_points : np.ndarray
         ``(N, 3)`` the same corners on the board (world), metres.
     K, dist : np.ndarray
@@ -37,10 +38,10 @@ def board_pose(corners: np.ndarray, object_points: np.ndarray, K: np.ndarray,
     rms_px : float
         RMS reprojection error of the pose, pixels.
     """
-    obj = np.asarray(object_points, np.float64)
-    img = np.asarray(corners, np.float64).reshape(-1, 2)
-    if len(obj) != len(img) or len(obj) < 4:
-        raise InputError(None, "corners", f"{len(img)} corners for {len(obj)} board points")
+    _, img, obj = seen_points(np.asarray(corners, np.float64),
+                              np.asarray(object_points, np.float64))
+    if len(img) < 4:
+        raise InputError(None, "corners", f"{len(img)} corners seen; a pose needs at least 4")
     ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
     if not ok:
         raise InputError(None, "corners", "solvePnP found no pose for the board")

@@ -22,10 +22,21 @@ def write_coverage_png(path: Path, counts: np.ndarray) -> None:
 
 def write_detection_png(path: Path, gray: np.ndarray, corners: np.ndarray | None,
                         pattern: tuple[int, int]) -> None:
-    """The image with its detected corners drawn (OpenCV's ``drawChessboardCorners``)."""
+    """The image with its detected corners drawn.
+
+    A whole board is drawn as OpenCV's ``drawChessboardCorners`` draws it (``pattern``: inner
+    corners per row and column); a partial one (NaN rows, a ChArUco board) as its seen corners,
+    each labelled with its id.
+    """
     bgr = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
     if corners is not None:
-        cv2.drawChessboardCorners(bgr, pattern, corners.reshape(-1, 1, 2).astype(np.float32), True)
+        corners = np.asarray(corners, np.float32).reshape(-1, 2)
+        seen = np.all(np.isfinite(corners), axis=1)
+        if seen.all():
+            cv2.drawChessboardCorners(bgr, pattern, corners.reshape(-1, 1, 2), True)
+        else:
+            ids = np.flatnonzero(seen).astype(np.int32).reshape(-1, 1)
+            cv2.aruco.drawDetectedCornersCharuco(bgr, corners[seen].reshape(-1, 1, 2), ids)
     cv2.imwrite(str(path), bgr)
 
 

@@ -15,10 +15,11 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from abs.acquisition.board import seen_points
 from abs.errors import InputError
 
 __all__ = ["IntrinsicCalibration", "calibrate_intrinsics", "coverage_map", "OUTLIER_FACTOR",
-           "POOR_COVERAGE"]
+           "POOR_COVERAGE", "MIN_VIEW_CORNERS"]
 
 #: A view whose RMS reprojection error exceeds this many times the median view's is an outlier.
 OUTLIER_FACTOR = 3.0
@@ -76,7 +77,7 @@ class IntrinsicCalibration:
 
 
 def coverage_map(image_points: Sequence[np.ndarray], width: int, height: int) -> np.ndarray:
-    """How many views' board outlines (convex hulls of the corners) cover each pixel.
+    """How many views' board outlines (convex hulls of the corners seen) cover each pixel.
 
     Returns
     -------
@@ -85,11 +86,19 @@ def coverage_map(image_points: Sequence[np.ndarray], width: int, height: int) ->
     """
     counts = np.zeros((height, width), np.int32)
     for pts in image_points:
-        hull = cv2.convexHull(np.round(np.asarray(pts, np.float32)).astype(np.int32))
+        pts = np.asarray(pts, np.float32).reshape(-1, 2)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]  # corners a partial view did not show
+        if len(pts) < 3:
+            continue
+        hull = cv2.convexHull(np.round(pts).astype(np.int32))
         one = np.zeros((height, width), np.uint8)
         cv2.fillConvexPoly(one, hull, 1)
         counts += one
     return counts
+
+
+#: Fewest corners a view must show: OpenCV starts each view from a homography (4 points).
+MIN_VIEW_CORNERS = 4
 
 
 def _check_views(image_points: Sequence[np.ndarray], names: Sequence[str]) -> None:
@@ -100,6 +109,20 @@ def _check_views(image_points: Sequence[np.ndarray], names: Sequence[str]) -> No
                                          "intrinsic calibration needs at least 3 varied views")
 
 
+def _view_points(image_points: Sequence[np.ndarray], object_points: np.ndarray,
+                 names: Sequence[str]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per view, the corners it shows and their board points (float32, OpenCV's shapes)."""
+    obj, img = [], []
+    for name, points in zip(names, image_points):
+        _, seen, board = seen_points(points, object_points)
+        if len(seen) < MIN_VIEW_CORNERS:
+            raise InputError(None, name, f"{len(seen)} corners seen; a view needs at least "
+                                         f"{MIN_VIEW_CORNERS}")
+        obj.append(np.asarray(board, np.float32).reshape(-1, 1, 3))
+        img.append(np.asarray(seen, np.float32).reshape(-1, 1, 2))
+    return obj, img
+
+
 def calibrate_intrinsics(image_points: Sequence[np.ndarray], object_points: np.ndarray,
                          width: int, height: int, names: Sequence[str] | None = None,
                          flags: int = 0) -> IntrinsicCalibration:
@@ -108,7 +131,9 @@ def calibrate_intrinsics(image_points: Sequence[np.ndarray], object_points: np.n
     Parameters
     ----------
     image_points : sequence of np.ndarray
-        Per view, ``(N, 2)`` detected corners, pixels.
+        Per view, ``(N, 2)`` detected corners, pixels, in ``object_points`` order; NaN rows for
+        corners the view does not show (a partial ChArUco board): each view is fitted with the
+        corners it shows, at least :data:`MIN_VIEW_CORNERS`.
     object_points : np.ndarray
         ``(N, 3)`` corner positions on the board, metres (:meth:`Board.object_points`).
     width, height : int
@@ -124,8 +149,7 @@ def calibrate_intrinsics(image_points: Sequence[np.ndarray], object_points: np.n
     """
     names = list(names) if names is not None else [f"view{i}" for i in range(len(image_points))]
     _check_views(image_points, names)
-    obj = [np.asarray(object_points, np.float32)] * len(image_points)
-    img = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in image_points]
+    obj, img = _view_points(image_points, object_points, names)
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     rms, K, dist, rvecs, tvecs, std_in, _, per_view = cv2.calibrateCameraExtended(
         obj, img, (width, height), None, None, flags=flags, criteria=criteria)

@@ -59,7 +59,9 @@ def calibrate_stereo(points1: Sequence[np.ndarray], points2: Sequence[np.ndarray
     Parameters
     ----------
     points1, points2 : sequence of np.ndarray
-        Per pair, ``(N, 2)`` corners in camera 1 and camera 2, pixels.
+        Per pair, ``(N, 2)`` corners in camera 1 and camera 2, pixels, NaN where a camera did
+        not see a corner (a partial ChArUco board); each pair is fitted with the corners both
+        cameras saw, at least 4.
     object_points : np.ndarray
         ``(N, 3)`` board corners, metres.
     K1, dist1, K2, dist2 : np.ndarray
@@ -71,9 +73,15 @@ def calibrate_stereo(points1: Sequence[np.ndarray], points2: Sequence[np.ndarray
         raise InputError(None, "pairs", f"{len(points1)} left and {len(points2)} right views")
     if len(points1) < 1:
         raise InputError(None, "pairs", "no pair where both cameras see the board")
-    obj = [np.asarray(object_points, np.float32)] * len(points1)
-    p1 = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in points1]
-    p2 = [np.asarray(p, np.float32).reshape(-1, 1, 2) for p in points2]
+    obj, p1, p2 = [], [], []
+    for k, (a, b) in enumerate(zip(points1, points2)):
+        both = _seen_in_both(a, b)
+        if both.sum() < 4:
+            raise InputError(None, f"pairs[{k}]", f"{both.sum()} corners seen by both cameras; a "
+                                                  "pair needs at least 4")
+        obj.append(np.asarray(object_points, np.float32)[both].reshape(-1, 1, 3))
+        p1.append(np.asarray(a, np.float32).reshape(-1, 2)[both].reshape(-1, 1, 2))
+        p2.append(np.asarray(b, np.float32).reshape(-1, 2)[both].reshape(-1, 1, 2))
     criteria = (cv2.TERM_CRITERIA_COUNT + cv2.TERM_CRITERIA_EPS, 100, 1e-12)
     out = cv2.stereoCalibrateExtended(obj, p1, p2, np.asarray(K1, np.float64),
                                       np.asarray(dist1), np.asarray(K2, np.float64),
@@ -86,21 +94,32 @@ def calibrate_stereo(points1: Sequence[np.ndarray], points2: Sequence[np.ndarray
                              rms_px=float(rms), pair_rms_px=np.asarray(per_view, np.float64))
 
 
+def _seen_in_both(points1: np.ndarray, points2: np.ndarray) -> np.ndarray:
+    """``(N,)`` bool: the corners with finite positions in both views."""
+    a = np.asarray(points1, np.float64).reshape(-1, 2)
+    b = np.asarray(points2, np.float64).reshape(-1, 2)
+    return np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
+
+
 def epipolar_errors_px(points1: np.ndarray, points2: np.ndarray, F: np.ndarray,
                        K1: np.ndarray, dist1: np.ndarray, K2: np.ndarray,
                        dist2: np.ndarray) -> np.ndarray:
     """Symmetric distance of matched points to each other's epipolar lines, pixels.
 
     Points are undistorted first (F relates undistorted pixels); the result for each match is
-    the mean of the distance of point 2 to the line of point 1 and vice versa.
+    the mean of the distance of point 2 to the line of point 1 and vice versa. Corners that
+    either view did not see (NaN) are left out.
 
     Returns
     -------
     np.ndarray
-        ``(N,)`` distances, pixels.
+        ``(M,)`` distances of the M corners seen in both views, pixels.
     """
-    u1 = cv2.undistortPoints(np.asarray(points1, np.float64).reshape(-1, 1, 2), K1, dist1, P=K1)
-    u2 = cv2.undistortPoints(np.asarray(points2, np.float64).reshape(-1, 1, 2), K2, dist2, P=K2)
+    both = _seen_in_both(points1, points2)
+    p1 = np.asarray(points1, np.float64).reshape(-1, 2)[both]
+    p2 = np.asarray(points2, np.float64).reshape(-1, 2)[both]
+    u1 = cv2.undistortPoints(p1.reshape(-1, 1, 2), K1, dist1, P=K1)
+    u2 = cv2.undistortPoints(p2.reshape(-1, 1, 2), K2, dist2, P=K2)
     u1, u2 = u1.reshape(-1, 2), u2.reshape(-1, 2)
     lines2 = cv2.computeCorrespondEpilines(u1.reshape(-1, 1, 2), 1, F).reshape(-1, 3)
     lines1 = cv2.computeCorrespondEpilines(u2.reshape(-1, 1, 2), 2, F).reshape(-1, 3)

@@ -20,7 +20,9 @@ def add_parser(sub) -> None:
 
     def common(q) -> None:
         q.add_argument("--board", required=True,
-                       help="board as KIND:COLSxROWS:SIZE, e.g. checkerboard:9x6:25mm (inner corners)")
+                       help="board: checkerboard:COLSxROWS:SIZE counting inner corners (e.g. "
+                            "checkerboard:9x6:25mm) or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+                            "counting squares (e.g. charuco:7x5:30mm:22mm:DICT_5X5_100)")
         q.add_argument("--out", type=Path, required=True, help="camera file (JSON) to write/update")
         q.add_argument("--report", type=Path, help="folder for figures and report.json")
 
@@ -124,7 +126,7 @@ def _figures(report: Path, label: str, det, calib, board) -> None:
     (report / f"{label}_corners").mkdir(exist_ok=True)
     for path, c in zip(det.paths, det.corners):
         write_detection_png(report / f"{label}_corners" / f"{path.stem}.png", read_gray(path), c,
-                            (board.cols, board.rows))
+                            board.inner_corners)
 
 
 def _run_intrinsics(args) -> int:
@@ -159,8 +161,11 @@ def _run_stereo(args) -> int:
                                             f"{n1}'s {d1.width}x{d1.height}: mixed image sizes")
     d1, c1 = _intrinsics(args.left, board, n1, False, d1)
     d2, c2 = _intrinsics(args.right, board, n2, False, d2)
+    # A pair counts when both cameras saw at least 4 of the same corners (a ChArUco board may be
+    # seen in part; a checkerboard is seen whole or not at all).
     both = [i for i in range(len(args.left)) if d1.corners[i] is not None
-            and d2.corners[i] is not None]
+            and d2.corners[i] is not None
+            and np.sum(np.isfinite(d1.corners[i]).all(1) & np.isfinite(d2.corners[i]).all(1)) >= 4]
     held = both[len(both) - args.holdout:] if args.holdout else []
     train = [i for i in both if i not in held]
     st = calibrate_stereo([d1.corners[i] for i in train], [d2.corners[i] for i in train],
@@ -207,7 +212,7 @@ def _run_extrinsics(args) -> int:
                                          f"{args.camera} is {cam.width}x{cam.height}")
     corners = detect_corners(gray, board)
     if corners is None:
-        raise InputError(args.image, "", f"board {board.cols}x{board.rows} not found")
+        raise InputError(args.image, "", f"board {board.spec} not found")
     R, t, rms = board_pose(corners, board.object_points(), cam.K, cam.distortion)
     # The file's poses so far are in a rig frame (stereo puts camera 1 at its origin); the board
     # view gives world -> this camera, hence world -> rig, which places the rig's other cameras.
