@@ -19,6 +19,7 @@ from abs.acquisition.board import detect_corners, parse_board, seen_points
 from abs.acquisition.camera_file import read_camera_file
 from abs.acquisition.extrinsics import board_pose
 from abs.acquisition.intrinsics import calibrate_intrinsics, coverage_map
+from abs.acquisition.stereo import calibrate_stereo, epipolar_errors_px
 from abs.acquisition.synthetic import board_images, board_views
 from abs.cli.main import main
 from abs.errors import InputError
@@ -141,6 +142,35 @@ def test_a_partly_hidden_board_still_gives_the_corners_it_shows(photographs):
     R, t, rms = board_pose(found, BOARD.object_points(), K_TRUE, DIST_TRUE)
     assert np.linalg.norm(t - views[7].t) < 1e-3 and rms < 0.3
     assert np.degrees(np.linalg.norm(cv2.Rodrigues(R @ views[7].R.T)[0])) < 0.2
+
+
+def test_stereo_uses_the_corners_both_cameras_saw():
+    """Stereo pairs of partial views: each pair is fitted with the corners both cameras saw."""
+    rng = np.random.default_rng(11)
+    obj = BOARD.object_points().astype(np.float64)
+    R12 = cv2.Rodrigues(np.array([0.01, 0.05, -0.02]))[0]  # camera 1 -> camera 2
+    T12 = np.array([-0.10, 0.002, 0.005])  # metres: a 10 cm baseline
+    points1, points2 = [], []
+    for k, view in enumerate(board_views(BOARD, K_TRUE, DIST_TRUE, WIDTH, HEIGHT)):
+        seen2, _ = cv2.projectPoints(obj, cv2.Rodrigues(R12 @ view.R)[0], R12 @ view.t + T12,
+                                     K_TRUE, DIST_TRUE)
+        p1 = view.corners + rng.normal(0, 0.05, view.corners.shape)
+        p2 = seen2.reshape(-1, 2) + rng.normal(0, 0.05, view.corners.shape)
+        column = np.arange(len(obj)) % BOARD.inner_corners[0]
+        p1[(column < 2) & (k % 2 == 0)] = np.nan  # camera 1 misses the left of every other board
+        p2[(column > 3) & (k % 3 == 0)] = np.nan  # camera 2 the right of every third
+        points1.append(p1)
+        points2.append(p2)
+    st = calibrate_stereo(points1, points2, obj, K_TRUE, DIST_TRUE, K_TRUE, DIST_TRUE, WIDTH,
+                          HEIGHT)
+    assert np.degrees(np.linalg.norm(cv2.Rodrigues(st.R @ R12.T)[0])) < 0.05
+    assert np.linalg.norm(st.T - T12) < 5e-4
+    errors = epipolar_errors_px(points1[0], points2[0], st.F, K_TRUE, DIST_TRUE, K_TRUE, DIST_TRUE)
+    assert len(errors) == 8 and errors.max() < 0.3  # columns 2 and 3 of 4 rows seen by both
+    points2[0][4:] = np.nan
+    with pytest.raises(InputError, match=r"pairs\[0\]: 2 corners seen by both cameras"):
+        calibrate_stereo(points1, points2, obj, K_TRUE, DIST_TRUE, K_TRUE, DIST_TRUE, WIDTH,
+                         HEIGHT)
 
 
 def test_cli_calibrates_intrinsics_from_charuco_photographs(photographs, tmp_path):

@@ -1,12 +1,14 @@
-"""Synthetic calibration data with known truth: board poses and their projected corners.
+"""Synthetic calibration data with known truth: board poses, their projected corners, pictures.
 
 A calibration is only as good as its views. Before photographing a board, or to check that a
 pipeline recovers a known camera, :func:`board_views` gives a standard set of views of a board
 through a known camera (K and Brown-Conrady distortion): a 3 x 3 grid of positions over the
 image, each seen at two tilts, with the exact pixel position of every corner. Those are the views
-of tests/test_acquisition_calibration.py and of ``benchmarks/acquisition.py``'s synthetic
-calibration; :func:`calibrate_intrinsics <abs.acquisition.intrinsics.calibrate_intrinsics>` on
-them (with 0.03 px of corner noise) recovers K within 0.5 %.
+of tests/test_acquisition_calibration.py, tests/test_acquisition_charuco.py and
+``benchmarks/acquisition.py``'s synthetic calibration;
+:func:`calibrate_intrinsics <abs.acquisition.intrinsics.calibrate_intrinsics>` on them (with
+0.03 px of corner noise) recovers K within 0.5 %. :func:`board_images` draws the board's picture
+into those views (exact geometry, supersampled, no noise), for testing detection as well.
 """
 
 from __future__ import annotations
