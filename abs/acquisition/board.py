@@ -174,12 +174,17 @@ def parse_board(spec: str, source: str | None = None, field: str = "board") -> B
     if len(parts) != expected:
         syntax = _SYNTAX.get(kind, _SYNTAX["checkerboard"])
         raise InputError(source, field, f"{spec!r}: expected {syntax}")
-    if kind != "charuco":
-        cols, rows = _parse_grid(parts[1], spec, source, field, "inner corners")
-        square_m = _parse_size(parts[2], spec, source, field, "square size")
-        if cols < 2 or rows < 2:
-            raise InputError(source, field, f"{spec!r}: need at least 2x2 inner corners")
-        return Board(kind, cols, rows, square_m)
+    if kind == "charuco":
+        return _parse_charuco(parts, spec, source, field)
+    cols, rows = _parse_grid(parts[1], spec, source, field, "inner corners")
+    square_m = _parse_size(parts[2], spec, source, field, "square size")
+    if cols < 2 or rows < 2:
+        raise InputError(source, field, f"{spec!r}: need at least 2x2 inner corners")
+    return Board(kind, cols, rows, square_m)
+
+
+def _parse_charuco(parts: list[str], spec: str, source: str | None, field: str) -> Board:
+    """``charuco:COLSxROWS:SQUARE:MARKER:DICT`` split at the colons (five parts)."""
     cols, rows = _parse_grid(parts[1], spec, source, field, "squares")
     square_m = _parse_size(parts[2], spec, source, field, "square size")
     marker_m = _parse_size(parts[3], spec, source, field, "marker size")
@@ -200,7 +205,7 @@ def parse_board(spec: str, source: str | None = None, field: str = "board") -> B
         raise InputError(source, field, f"{spec!r}: a {cols}x{rows} board has "
                                         f"{cols * rows // 2} markers but {dictionary} only "
                                         f"{n_markers}; take a larger dictionary")
-    return Board(kind, cols, rows, square_m, marker_m, dictionary)
+    return Board("charuco", cols, rows, square_m, marker_m, dictionary)
 
 
 def _detect_checkerboard(gray: np.ndarray, board: Board) -> np.ndarray | None:
