@@ -1,4 +1,4 @@
-"""The pieces of a fit: transforms, the Dr.Jit -> JAX bridge, Laplace, downsampling, Jacobians."""
+"""The pieces of a fit: transforms, the optimisers, Laplace, downsampling, Jacobians."""
 
 from __future__ import annotations
 
@@ -52,14 +52,37 @@ def _linear_problem(seed=0, m=200, noise=0.1):
     return A, y, truth
 
 
-def test_levenberg_marquardt_through_the_jax_bridge_solves_least_squares():
+def test_levenberg_marquardt_solves_least_squares():
     A, y, _ = _linear_problem()
     exact = np.linalg.lstsq(A, y, rcond=None)[0]
     seen = []
-    state = levenberg_marquardt(lambda z, it: (A @ z - y, A, 0.0), OptimizerState("lm", 0, np.zeros(3)),
-                                len(y), 20, on_iteration=lambda s: seen.append(s.iteration))
+    same = lambda z, it: ((A @ z - y, A), (A @ z - y, A), 0.0)  # noqa: E731  (noise-free renders)
+    state = levenberg_marquardt(same, OptimizerState("lm", 0, np.zeros(3)), 20,
+                                on_iteration=lambda s: seen.append(s.iteration))
     assert np.allclose(state.z, exact, atol=1e-6)
+    assert state.solver.converged
     assert seen == list(range(1, len(seen) + 1)) and len(seen) < 20
+
+
+def test_levenberg_marquardt_has_no_bias_from_noise_that_depends_on_the_parameters():
+    """Renders whose Monte-Carlo noise grows with the parameter (a brighter glass is noisier):
+    least squares on one fixed-seed render prefers the darker, less noisy value; the two-seed
+    objective's minimum is the truth's."""
+    rng = np.random.default_rng(3)
+    a = rng.uniform(0.5, 1.5, 4000)
+    truth = 2.0
+    y = truth * a + 0.01 * rng.normal(size=a.size)
+    noise = rng.normal(size=(2, a.size))  # two fixed seeds: relative noise of 100 %
+
+    def render(z, k):
+        return z[0] * a * (1 + noise[k]) - y, (a * (1 + noise[k]))[:, None]
+
+    one_seed = levenberg_marquardt(lambda z, it: (render(z, 0), render(z, 0), 0.0),
+                                   OptimizerState("lm", 0, np.array([1.0])), 30)
+    two_seed = levenberg_marquardt(lambda z, it: (render(z, 0), render(z, 1), 0.0),
+                                   OptimizerState("lm", 0, np.array([1.0])), 30)
+    assert one_seed.z[0] < 0.6 * truth  # the biased minimum: truth / (1 + variance)
+    assert abs(two_seed.z[0] - truth) < 0.05 * truth, two_seed.z
 
 
 def test_levenberg_marquardt_reports_errors_of_the_evaluation():
@@ -67,7 +90,7 @@ def test_levenberg_marquardt_reports_errors_of_the_evaluation():
         raise RuntimeError("renderer failed")
 
     with pytest.raises(RuntimeError, match="renderer failed"):
-        levenberg_marquardt(failing, OptimizerState("lm", 0, np.zeros(2)), 5, 3)
+        levenberg_marquardt(failing, OptimizerState("lm", 0, np.zeros(2)), 3)
 
 
 def test_refinement_takes_full_steps_despite_very_noisy_jacobians():

@@ -3,7 +3,7 @@
 A fit is an objective (:class:`~abs.fitting.objective.Objective`: weighted residuals, their
 Jacobian and the gradient over the unconstrained vector ``z``) plus an optimiser looked up here by
 the name in :attr:`FitSettings.method <abs.fitting.settings.FitSettings.method>`. As optimistix
-keeps its solvers, each optimiser is an object, and what it must remember between iterations is a
+and optax keep theirs, each optimiser is an object, and what it must remember between iterations is a
 typed state of its own (a frozen dataclass), not a shared dictionary: a resumed fit restores
 exactly those fields, and a mistyped one fails at once.
 
