@@ -149,6 +149,17 @@ def test_cross_curvature_is_unbiased_where_the_self_product_is_not():
     assert np.all(np.diag(self_product) > 1.5 * np.diag(truth))
 
 
+def test_cross_curvature_keeps_small_columns_curvature_beside_large_ones():
+    """An environment scale's column is ~60x an absorption's: the positive-definite floor must
+    not raise the small column's curvature (it had, fivefold, and steps went a fifth of the way)."""
+    rng = np.random.default_rng(4)
+    J = np.column_stack([60.0 * rng.normal(size=500), rng.normal(size=500)])
+    H = cross_curvature(J + 0.01 * rng.normal(size=J.shape), J + 0.01 * rng.normal(size=J.shape))
+    truth = J.T @ J
+    assert H[1, 1] == pytest.approx(truth[1, 1], rel=0.02)
+    assert np.linalg.solve(H, truth[:, 1]) == pytest.approx([0.0, 1.0], abs=0.02)
+
+
 def test_adam_converges_and_resumes_from_its_state():
     A, y, _ = _linear_problem()
     exact = np.linalg.lstsq(A, y, rcond=None)[0]

@@ -29,7 +29,8 @@ import numpy as np
 from abs.fitting.optimisers import Callback, Optimiser, OptimizerState, register
 
 __all__ = ["LevenbergMarquardt", "LMState", "RefinementState", "levenberg_marquardt",
-           "gauss_newton_refinement", "cross_curvature", "averaged_refinement_points", "lm_stages"]
+           "gauss_newton_refinement", "cross_curvature", "column_scale",
+           "averaged_refinement_points", "lm_stages"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,7 +194,8 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
     solvers, which abs used before, take residual functions only): the model ``f + g.d + d.H.d / 2`` with the exact gradient
     ``g = (J_A^T r_B + J_B^T r_A) / 2`` and the cross curvature ``H`` of the two Jacobians
     (:func:`cross_curvature`, the Gauss-Newton curvature without the Jacobians' noise);
-    steps ``(H + lambda diag H) d = -g``; a trial is accepted when ``f`` falls by at least a
+    steps ``(H + lambda S) d = -g`` (``S``: each column's own squared size,
+    :func:`column_scale`); a trial is accepted when ``f`` falls by at least a
     thousandth of the predicted fall, and ``lambda`` follows Nielsen's rule.
 
     Parameters
@@ -219,23 +221,23 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
         g = 0.5 * (Ja.T @ rb + Jb.T @ ra)
         state.history.append({"iteration": state.iteration, "loss": float(loss), "objective": f,
                               "z": list(map(float, point))})
-        return f, g, cross_curvature(Ja, Jb)
+        return f, g, (cross_curvature(Ja, Jb), column_scale(Ja, Jb))
 
-    f, g, H = at(z)
+    f, g, (H, scale) = at(z)
     state.z = z
     if on_iteration is not None:
         on_iteration(state)
     damping, growth, converged = 1e-3, 2.0, False
     while state.iteration < max_iterations:
-        step = np.linalg.solve(H + damping * np.diag(np.diag(H)), -g)
+        step = np.linalg.solve(H + damping * np.diag(scale), -g)
         if np.all(np.abs(step) <= atol + rtol * np.abs(z)):
             converged = True
             break
         predicted = -float(g @ step + 0.5 * step @ H @ step)
-        f_trial, g_trial, H_trial = at(z + step)
+        f_trial, g_trial, curvature_trial = at(z + step)
         ratio = (f - f_trial) / predicted if predicted > 0 else -np.inf
         if ratio > 1e-3:
-            z, f, g, H = z + step, f_trial, g_trial, H_trial
+            z, f, g, (H, scale) = z + step, f_trial, g_trial, curvature_trial
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
             growth = 2.0
         else:
@@ -256,13 +258,24 @@ def cross_curvature(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
 
     ``E[J1^T J1] = Jbar^T Jbar + Cov`` overstates the curvature by the Jacobian's Monte-Carlo
     covariance; ``(J1^T J2 + J2^T J1) / 2`` has expectation ``Jbar^T Jbar`` exactly. Its noise can
-    make small eigenvalues negative: they are raised to 1e-3 of the largest (such directions are
-    then limited by the step clip, not thrown far).
+    make small eigenvalues negative: they are raised to 1e-3 of the largest, in the matrix scaled
+    to unit column sizes (``diag`` of the self products): the columns' sizes differ by orders (an
+    environment scale moves every pixel, an absorption the glass's few), and a floor relative to
+    the unscaled matrix's largest eigenvalue had raised glass absorption's curvature fivefold, so
+    that every step went a fifth of the way.
     """
     H = 0.5 * (J1.T @ J2 + J2.T @ J1)
-    w, V = np.linalg.eigh(H)
+    size = np.sqrt(np.maximum(column_scale(J1, J2), 1e-300))
+    w, V = np.linalg.eigh(H / np.outer(size, size))
     w = np.maximum(w, 1e-3 * max(float(w.max()), 1e-300))
-    return (V * w) @ V.T
+    return (V * w) @ V.T * np.outer(size, size)
+
+
+def column_scale(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
+    """Mean squared size of each Jacobian column over the two Jacobians: each coordinate's own
+    scale, noise included (what Levenberg-Marquardt's damping and the curvature floor are
+    measured in, so that a column that is mostly noise is still damped at its own size)."""
+    return 0.5 * (np.sum(J1 ** 2, axis=0) + np.sum(J2 ** 2, axis=0))
 
 
 def _turned_back(points: list) -> bool:
