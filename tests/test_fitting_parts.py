@@ -138,6 +138,24 @@ def test_refinement_travels_far_when_the_solution_is_many_typical_steps_away():
     assert np.abs(np.asarray(fixed.solver.refinement.points[0]) - start).max() == pytest.approx(1.0)
 
 
+def test_refinement_averages_points_that_scatter_beyond_the_trust_radius():
+    """At the solution, full Newton steps on fresh renders scatter by more than the trust radius
+    (glass at 64 spp): those clipped steps turn back and are averaged, not taken for travel."""
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    rng = np.random.default_rng(5)
+    scatter = 1.5  # typical steps per Newton step
+    noise = scatter * np.linalg.norm(A, axis=0).mean()
+
+    def noisy(z, it):
+        return A @ z - y + noise * rng.normal(size=len(y)), (A, A), 0.0
+
+    state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, exact.copy()), steps=24)
+    averaged = len(state.solver.refinement.points) - sum(state.solver.refinement.clipped)
+    assert averaged >= 12, state.solver.refinement.clipped
+    assert np.all(np.abs(state.z - exact) < 1.0), state.z - exact
+
+
 def test_cross_curvature_is_unbiased_where_the_self_product_is_not():
     rng = np.random.default_rng(0)
     J = rng.normal(size=(200, 3))
