@@ -6,7 +6,8 @@ environment) with a glass object of known IOR and absorption, by **plain Mitsuba
 the ``volpath`` integrator, never abs's own path tracer. Sensor noise is added, the last view is a
 holdout view. The scene file handed to the fit starts from IOR 1.5, absorption 1/1/1 per metre
 and environment scale 1; ``abs.fit`` then fits ``glass.absorption``, ``glass.ior`` and
-``environment.scale`` at its default settings.
+``environment.scale`` at the settings of the glass recipe (``fitting/glass_absorption_ior.py``:
+``SETTINGS``, IOR tied), unless ``--settings`` replaces them.
 
 Reported per case: fitted values and standard errors against the truth, whether each truth lies
 within two standard errors, holdout RMSE before/after, the fit's own checks, renders and time.
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,7 +116,7 @@ def run_case(case: Case, work: Path, args) -> dict:
                          width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
                          read_noise=0.003, seed=1, render=mitsuba_photograph)
         made.write_text(json.dumps({**shape, "truth": _truth(case)}))
-    settings = FitSettings(**json.loads(args.settings))
+    settings = FitSettings(**_settings(args.settings))
     start = time.perf_counter()
 
     def progress(state):
@@ -140,7 +142,20 @@ def run_case(case: Case, work: Path, args) -> dict:
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
             "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
                       for h in result.history],
-            "settings": {**shape, "fit": json.loads(args.settings) or "abs.fit defaults"}}
+            "settings": {**shape, "fit": {k: list(v) if isinstance(v, tuple) else v
+                                          for k, v in _settings(args.settings).items()}}}
+
+
+def _settings(text: str) -> dict:
+    """``--settings`` JSON, or the glass recipe's settings when it is empty."""
+    given = json.loads(text)
+    if given:
+        return {k: tuple(map(tuple, v)) if k.endswith("schedule") else
+                tuple(v) if isinstance(v, list) else v for k, v in given.items()}
+    sys.path.insert(0, str(ROOT / "fitting"))
+    from glass_absorption_ior import SETTINGS
+
+    return {**SETTINGS, "tie": ("glass.ior",)}
 
 
 def table(results: list[dict]) -> list[str]:
@@ -170,7 +185,7 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=ROOT / "out/glass-fit")
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--settings", default="{}",
-                        help="FitSettings fields as JSON (default: abs.fit's defaults, the suite's claim)")
+                        help="FitSettings fields as JSON (default: the glass recipe's settings)")
     args = parser.parse_args()
     chosen = CASES if args.cases == "all" else [c for c in CASES if c.name in args.cases.split(",")]
     done = json.loads(args.results.read_text()) if args.results.exists() else []
