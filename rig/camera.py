@@ -36,6 +36,10 @@ class Camera(Protocol):
             If no image arrives in time.
         """
 
+    def strays(self, wait_s: float) -> list[Path]:
+        """Images that arrived outside :meth:`capture` (late images of a failed exposure), after
+        waiting up to ``wait_s`` seconds for them."""
+
 
 class SerialShutter:
     """Trigger through the rig controller's ``SHOOT`` command (remote release, bulb mode).
@@ -106,6 +110,7 @@ class DropFolderCamera:
         self.stable_s = stable_s
         self.suffixes = suffixes
         self.poll_s = poll_s
+        self._known = set(self._images())  # files that are not images of ours
 
     def _images(self) -> dict[str, int]:
         out = {}
@@ -123,6 +128,7 @@ class DropFolderCamera:
         self.trigger(exposure_s)
         deadline = time.monotonic() + self.timeout_s
         sizes: dict[str, tuple[int, float]] = {}
+        new: dict[str, int] = {}
         while time.monotonic() < deadline:
             new = {n: s for n, s in self._images().items() if n not in before}
             if len(new) > 1:
@@ -135,7 +141,25 @@ class DropFolderCamera:
                 if seen is None or seen[0] != size:
                     sizes[name] = (size, now)
                 if size > 0 and now - sizes[name][1] >= self.stable_s:
+                    self._known = before | {name}
                     return self.folder / name
             time.sleep(self.poll_s)
+        self._known = before | set(new)
         raise CameraError(f"{self.folder}: no image arrived within {self.timeout_s:g} s of a "
                           f"{exposure_s:g} s exposure; is the camera on and saving to this folder?")
+
+    def strays(self, wait_s: float = 1.0) -> list[Path]:
+        """Images that arrived since the last :meth:`capture` returned, after waiting ``wait_s``
+        seconds for late ones.
+
+        After a failed exposure (the controller restarted during ``SHOOT``) the camera may still
+        deliver that image; were it left in the folder, it could arrive during the next capture and
+        be taken for that frame. The runner calls this after such a failure and moves the strays
+        out of the way.
+        """
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline:
+            time.sleep(self.poll_s)
+        found = sorted(set(self._images()) - self._known)
+        self._known |= set(found)
+        return [self.folder / n for n in found]

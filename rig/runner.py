@@ -4,25 +4,28 @@ For each turntable position: turn; global light on, its frames, off; then for ea
 frames (an HDR bracket when the plan gives several exposures), off. A *light group* (one light at
 one position) is the unit of work:
 
-1. turn the table if it is not known to stand at the group's angle;
+1. turn the table, unless it is known to stand at the group's angle;
 2. switch the light on and wait ``settle_s``;
-3. take the group's frames that are not yet in place;
-4. switch the light off;
-5. only now move the images into the session and record them.
+3. for each frame of the group not yet in place: expose; ask ``STATUS``; if the controller still
+   reports the same boot id, angle and light, move the image into the session and record it;
+4. switch the light off.
 
-Every command's acknowledgement carries the controller's boot id, so if the controller restarted
-anywhere between the acknowledgement of step 2 and that of step 4, the client raises
-:class:`~rig.errors.DeviceReset` before step 5: the images may have been taken in the dark or at
-the home position, so they are discarded, the table is turned again and the group retaken. A
-group whose step 4 was acknowledged by the same boot was lit as planned throughout.
+Why step 3 proves a frame: every reply carries the controller's boot id, which changes when it
+restarts (and with it the turntable's position and the lights are lost). The ``STATUS`` reply comes
+after the exposure ended; the same boot id as the ``TURN`` and switch-on acknowledgements means no
+restart in between, so the image was taken as planned. A restart anywhere in the group makes the
+client raise :class:`~rig.errors.DeviceReset`; the unproven image (and any late image the camera
+still delivers) is set aside in ``SESSION/discarded/``, the table is turned again and the group's
+missing frames retaken. Frames are recorded one by one, so a run that stops loses none of those
+already proven, and a frame is recorded only once.
 
 Any other failure (a controller that stops answering, a camera that delivers nothing) stops the
-run with a :class:`~abs.errors.DeviceError` naming the port and the last command. The frames in
-place stay recorded; running the same plan into the same folder again takes only the missing ones.
+run with a :class:`~abs.errors.DeviceError` naming the port and the last command. Running the same
+plan into the same folder again takes only the missing frames.
 """
-
 from __future__ import annotations
 
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -79,6 +82,50 @@ def _switch(client: RigClient, group: LightGroup, on: bool) -> None:
         client.led(light.board, light.led, level)
 
 
+class _StateLost(Exception):
+    """The rig is not in the state a frame needs (a restart, or STATUS disagrees)."""
+
+
+def _verify(client: RigClient, group: LightGroup) -> None:
+    """Check, after an exposure, that the rig still stands and shines as the group needs.
+
+    The ``STATUS`` reply comes after the exposure ended; if it carries the same boot id as the
+    acknowledgements of ``TURN`` and of the light's switch-on, the controller did not restart in
+    between, so the image was taken in that state. It also compares the reported angle and lights
+    with the plan, which catches a state changed by anything else.
+
+    Raises
+    ------
+    _StateLost
+        With the reason.
+    """
+    try:
+        st = client.status()
+    except DeviceReset as exc:
+        raise _StateLost(f"controller restarted (boot {exc.old_boot} -> {exc.new_boot})") from exc
+    light = group.light
+    want_lit = {(light.board, light.led): light.level} if light.kind == "led" else {}
+    want_global = light.level if light.kind == "global" else 0
+    if abs(st.angle_deg - group.angle_deg) > 0.005 or st.lit != want_lit or st.global_level != want_global:
+        raise _StateLost(f"STATUS reports angle {st.angle_deg:g}, global {st.global_level}, LEDs "
+                         f"{st.lit}; expected {group.angle_deg:g}, {want_global}, {want_lit}")
+
+
+def _set_aside(session: Session, camera: Camera, wait_s: float, pending: Path | None) -> list[Path]:
+    """Move the unproven image and the camera's late images into ``SESSION/discarded/``."""
+    strays = ([pending] if pending is not None else []) + camera.strays(wait_s)
+    if not strays:
+        return []
+    folder = session.folder / "discarded"
+    folder.mkdir(exist_ok=True)
+    moved = []
+    for path in strays:
+        target = folder / path.name
+        shutil.move(str(path), target)
+        moved.append(target)
+    return moved
+
+
 def _dark_after_restart_is_fine(client: RigClient) -> None:
     """``DARK``; a restart reported on it is no failure, since a restarted controller is dark."""
     try:
@@ -88,7 +135,7 @@ def _dark_after_restart_is_fine(client: RigClient) -> None:
 
 
 def run_capture(client: RigClient, camera: Camera, plan: CapturePlan, out: str | Path, *,
-                camera_model: str = "camera", max_resets_per_group: int = 3,
+                camera_model: str = "camera", max_resets_per_group: int = 3, stray_wait_s: float = 1.0,
                 log: Callable[[str], None] = lambda message: None) -> RunResult:
     """Take every frame of ``plan`` that ``out`` does not hold yet.
 
@@ -107,6 +154,9 @@ def run_capture(client: RigClient, camera: Camera, plan: CapturePlan, out: str |
     max_resets_per_group : int
         Controller restarts tolerated while taking one group before giving up (a controller that
         restarts every few seconds has a power problem that retrying will not fix).
+    stray_wait_s : float
+        After a failed exposure, how long to wait for the camera's late image before setting it
+        aside, seconds.
     log : callable
         Receives one line per event (progress, resets).
 
@@ -143,38 +193,42 @@ def run_capture(client: RigClient, camera: Camera, plan: CapturePlan, out: str |
         angle: float | None = None  # unknown until we turn: a resumed rig may stand anywhere
         groups = plan.groups()
         for k, group in enumerate(groups):
-            missing = [f for f in group.frames if not session.done(f.id)]
-            if missing:
-                for attempt in range(max_resets_per_group + 1):
-                    shots: list[Path] = []
-                    try:
-                        if angle != group.angle_deg:
-                            client.turn(group.angle_deg)
-                            angle = group.angle_deg
-                        _switch(client, group, True)
-                        if session.plan.settle_s:
-                            time.sleep(session.plan.settle_s)
-                        for spec in missing:
-                            shots.append(camera.capture(spec.exposure_s))
-                        _switch(client, group, False)
-                        boot = client.boot
-                    except DeviceReset as exc:
-                        resets += 1
-                        angle = None
-                        for shot in shots:  # taken in an unknown state: not a frame of the plan
-                            shot.unlink(missing_ok=True)
-                        session.event("reset", group=f"p{group.position:03d}-{group.light.name}",
-                                      old_boot=exc.old_boot, new_boot=exc.new_boot,
-                                      command=exc.command, discarded=len(shots))
-                        log(f"controller restarted during p{group.position:03d} "
-                            f"{group.light.name}; retaking {len(shots)} image(s)")
-                        continue
-                    for spec, shot in zip(missing, shots):
-                        session.commit(spec, shot, boot)
-                        taken += 1
+            for attempt in range(max_resets_per_group + 1):
+                missing = [f for f in group.frames if not session.done(f.id)]
+                if not missing:
                     break
-                else:
-                    raise DeviceError(f"{client.port}: the controller restarted "
+                pending: Path | None = None  # an image taken but not yet proven
+                try:
+                    if angle != group.angle_deg:
+                        client.turn(group.angle_deg)
+                        angle = group.angle_deg
+                    _switch(client, group, True)
+                    if plan.settle_s:
+                        time.sleep(plan.settle_s)
+                    for spec in missing:
+                        pending = camera.capture(spec.exposure_s)
+                        _verify(client, group)
+                        session.commit(spec, pending, client.boot)
+                        pending = None
+                        taken += 1
+                    _switch(client, group, False)
+                    break
+                except (_StateLost, DeviceReset) as exc:
+                    resets += 1
+                    restart = exc if isinstance(exc, DeviceReset) else exc.__cause__
+                    angle = None
+                    discarded = _set_aside(session, camera, stray_wait_s, pending)
+                    session.event("reset", group=f"p{group.position:03d}-{group.light.name}",
+                                  reason=str(exc), command=client.last_command,
+                                  old_boot=getattr(restart, "old_boot", None),
+                                  new_boot=getattr(restart, "new_boot", None),
+                                  discarded=[p.name for p in discarded])
+                    log(f"p{group.position:03d} {group.light.name}: {exc}; retaking "
+                        f"({len(discarded)} image(s) set aside)")
+                    _dark_after_restart_is_fine(client)
+            else:
+                if any(not session.done(f.id) for f in group.frames):
+                    raise DeviceError(f"{client.port}: the controller lost its state "
                                       f"{max_resets_per_group + 1} times while taking "
                                       f"p{group.position:03d} {group.light.name}; check its power "
                                       f"supply (last command: {client.last_command!r})")
