@@ -10,8 +10,8 @@ Layout::
 
 Why a journal beside the manifest: a frame must be recorded the moment its file is in place, and
 rewriting a manifest of thousands of frames after each one costs O(n^2) bytes over a session
-(40 positions x 37 lights x a 3-exposure bracket is 4440 frames). Appending one fsynced line is
-O(1). A crash can tear only the last line; :meth:`Session.open` drops a torn line, so a frame is
+(40 positions x (one global frame + 36 LEDs x a 3-exposure bracket) is 4360 frames). Appending
+one fsynced line is O(1). A crash can tear only the last line; :meth:`Session.open` drops a torn line, so a frame is
 either recorded whole or not at all. The manifest is rebuilt from the journal at the end of every
 turntable position and whenever the runner stops, and always describes every recorded frame at
 those points.
