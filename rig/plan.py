@@ -175,8 +175,10 @@ def plan_from_dict(data: dict[str, Any], source: str | Path | None = None) -> Ca
         raw = table["angles_deg"]
         if not isinstance(raw, list) or not raw:
             raise InputError(source, "turntable.angles_deg", "expected a non-empty list of degrees")
-        angles = tuple(_number(source, f"turntable.angles_deg[{i}]", a, 0.0, 359.99)
-                       for i, a in enumerate(raw))
+        # Rounded to the protocol's 0.01 degree (TURN takes two decimals), so that the angle
+        # STATUS reports compares equal to the planned one; 359.996 rounds to 0.
+        angles = tuple(round(_number(source, f"turntable.angles_deg[{i}]", a, 0.0, 360.0), 2)
+                       % 360.0 for i, a in enumerate(raw))
     elif "positions" in table:
         n = _integer(source, "turntable.positions", table["positions"], 1, 36000)
         angles = tuple(round(360.0 * k / n, 2) for k in range(n))

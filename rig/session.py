@@ -155,6 +155,9 @@ class Session:
         session._journal = open(session.journal_path, "a", encoding="utf-8")
         session.event("resume" if session.records or manifest_path.exists() else "start",
                       port=port, frames_in_place=len(session.records))
+        # At once, so that even a run killed before its first position is done leaves the plan
+        # behind for the next run to check against.
+        session.write_manifest(complete=False)
         return session
 
     def _take_lock(self) -> None:

@@ -187,3 +187,54 @@ def test_cli_capture_simulated_and_resumed(tmp_path, capsys):
     assert main(["rig", "capture", "--port", "socket://127.0.0.1:1", "--plan", str(plan), "--out",
                  str(tmp_path / "x"), "--camera-folder", str(tmp_path / "cf")]) == 3
     assert "socket://127.0.0.1:1" in capsys.readouterr().err
+
+
+def test_sigkill_and_resume_from_the_command_line(tmp_path):
+    """The real thing: ``abs rig capture --simulate`` killed with SIGKILL in mid-session (no
+    ``finally`` runs), then the same command again."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from abs.cli.main import main
+    from rig.sim import default_dome
+
+    plan_data = {"turntable": {"positions": 4}, "global_light": {"level": 255, "exposures_s": [0.02]},
+                 "leds": {"boards": 2, "leds_per_board": 3}, "exposures_s": [0.01, 0.04],
+                 "settle_s": 0.05}  # 28 groups x 50 ms: time to kill it in the middle
+    plan = tmp_path / "plan.json"
+    plan.write_text(json.dumps(plan_data))
+    out = tmp_path / "session"
+    args = ["rig", "capture", "--simulate", "--plan", str(plan), "--out", str(out), "--sim-size", "16x12"]
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "abs.cli.main", *args], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    journal = out / "frames.jsonl"
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        if journal.exists() and journal.read_bytes().count(b'"type":"frame"') >= 8:
+            break
+        time.sleep(0.002)
+    assert proc.poll() is None, f"finished before it could be killed: {proc.stderr.read()}"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = json.loads((out / "manifest.json").read_text())
+    assert not before["complete"]
+    assert main(args) == 0
+    manifest = json.loads((out / "manifest.json").read_text())
+    expected = plan_from_dict(plan_data).frames()
+    assert [f["id"] for f in manifest["frames"]] == [f.id for f in expected] and manifest["complete"]
+    assert sorted(p.name for p in (out / "frames").iterdir()) == sorted(
+        Path(f["file"]).name for f in manifest["frames"])
+    resumed = [e for e in manifest["events"] if e["event"] == "resume"]
+    assert len(resumed) == 1 and resumed[0]["frames_in_place"] >= 8
+    dome = default_dome(2, 3)
+    for spec, record in zip(expected, manifest["frames"]):
+        light = spec.light
+        leds = {(light.board, light.led): light.level} if light.kind == "led" else {}
+        image = render_frame(dome, 16, 12, spec.angle_deg,
+                             light.level if light.kind == "global" else 0, leds, spec.exposure_s)
+        np.testing.assert_allclose(read_image(out / record["file"]), image, atol=1e-6)
