@@ -13,5 +13,6 @@ Modules, one concept each:
 - :mod:`rig.sim`: a simulated rig speaking the same protocol, with fault injection.
 
 ``rig`` sits outside ``abs/`` and above every abs layer but the command line: it imports
-``abs.errors``, ``abs.camera`` and ``abs.io``; ``abs rig`` (``abs/cli/rig.py``) imports it lazily.
+``abs.errors``, ``abs.camera``, ``abs.io`` (and ``abs.render``, ``abs.studies`` for abs-rendered
+simulated frames); ``abs rig`` (``abs/cli/rig.py``) imports it lazily.
 """

@@ -238,3 +238,15 @@ def test_sigkill_and_resume_from_the_command_line(tmp_path):
         image = render_frame(dome, 16, 12, spec.angle_deg,
                              light.level if light.kind == "global" else 0, leds, spec.exposure_s)
         np.testing.assert_allclose(read_image(out / record["file"]), image, atol=1e-6)
+
+
+def test_frames_rendered_by_abs(tmp_path):
+    """``renderer="abs"``: the same session code, frames from abs's point-light pass (a Lambertian
+    box); the turntable's quarter turn shows in the image, the LED lights the box."""
+    plan = plan_from_dict({"turntable": {"angles_deg": [0, 90]}, "leds": [[0, 0]], "exposures_s": [0.01]})
+    with SimulatedRig(tmp_path / "incoming", 1, 1, W, H, renderer="abs") as sim:
+        result = _run(sim, tmp_path, plan)
+    assert result.complete
+    a, b = (read_image(tmp_path / "frames" / f"p00{k}-b00l00-e0.exr") for k in (0, 1))
+    assert a.max() > 0.05 and b.max() > 0.05  # lit
+    assert (a > 0).any(axis=2).sum() > 1.3 * (b > 0).any(axis=2).sum()  # broad side, then narrow

@@ -11,8 +11,13 @@ import shlex
 import sys
 from pathlib import Path
 
-SIMULATED_CAMERA = ("simulated: textured Lambertian sphere rendered in numpy by rig.sim.optics "
-                    "(one ray per pixel, no noise), not abs's renderer")
+SIMULATED_CAMERA = {
+    "sphere": "simulated: textured Lambertian sphere rendered in numpy by rig.sim.optics (one ray "
+              "per pixel, no noise), not abs's renderer",
+    "abs": "simulated: Lambertian box rendered by abs (abs.studies.sl_capture.render_point_lit) "
+           "through rig.sim.abs_optics; LED attenuation at the object's centre only, global light "
+           "as a point light at the camera",
+}
 
 
 def add_parser(sub) -> None:
@@ -28,6 +33,10 @@ def add_parser(sub) -> None:
     cap.add_argument("--simulate", action="store_true", help="run against the simulated rig (a local "
                      "socket speaking the same protocol; its camera writes to OUT/incoming)")
     cap.add_argument("--sim-size", default="64x48", help="simulated image size WxH (default %(default)s)")
+    cap.add_argument("--sim-renderer", choices=sorted(SIMULATED_CAMERA), default="sphere",
+                     help="simulated frames: 'sphere', a textured Lambertian sphere in numpy "
+                     "(milliseconds a frame), or 'abs', a Lambertian box rendered by abs's "
+                     "point-light pass (about 0.3 s a frame at 32x24); default %(default)s")
     _link_options(cap)
     cap.add_argument("--camera-folder", type=Path, help="folder the camera saves images into "
                      "(required with a real rig)")
@@ -100,8 +109,9 @@ def run_capture(args) -> int:
         width, height = _size(args.sim_size)
         boards = max([b for b, _ in plan.leds], default=0) + 1
         per_board = max([i for _, i in plan.leds], default=0) + 1
-        sim = SimulatedRig(args.out / "incoming", boards, per_board, width, height)
-        port, folder, model = sim.url, args.out / "incoming", SIMULATED_CAMERA
+        sim = SimulatedRig(args.out / "incoming", boards, per_board, width, height,
+                           renderer=args.sim_renderer)
+        port, folder, model = sim.url, args.out / "incoming", SIMULATED_CAMERA[args.sim_renderer]
     else:
         if not args.port:
             raise InputError(None, "--port", "required (or --simulate)")

@@ -1,6 +1,7 @@
 """The simulated camera on the controller's remote-release pin: ``SHOOT`` writes an image file.
 
-It renders with the device's state at the moment the shutter fires (:mod:`rig.sim.optics`), so a
+It renders with the device's state at the moment the shutter fires (:mod:`rig.sim.optics`, or
+:mod:`rig.sim.abs_optics`), so a
 frame taken after a restart switched the lights off is dark, exactly the failure the capture
 runner must catch. Files are written under a hidden name and renamed, as tethering programs do,
 so the host never reads half a file.
@@ -11,13 +12,18 @@ from __future__ import annotations
 import itertools
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 from abs.io.images import write_exr
 from rig.sim.device import DeviceState
-from rig.sim.optics import Dome, render_frame
 
-__all__ = ["ShutterCamera"]
+__all__ = ["ShutterCamera", "Renderer"]
+
+Renderer = Callable[[DeviceState, float], np.ndarray]
+"""``render(state, exposure_s)``: the (height, width, 3) image in [0, 1] for the device's state."""
 
 
 class ShutterCamera:
@@ -27,24 +33,20 @@ class ShutterCamera:
     ----------
     folder : Path
         The drop folder images appear in.
-    dome : Dome
-        Light-stage geometry.
-    width, height : int
-        Image size, pixels.
+    render : Renderer
+        Makes the image (:func:`rig.sim.optics.render_frame` through
+        :class:`rig.sim.SimulatedRig`, or :class:`rig.sim.abs_optics.AbsBoxRenderer`).
     """
 
-    def __init__(self, folder: Path, dome: Dome, width: int = 32, height: int = 24):
+    def __init__(self, folder: Path, render: Renderer):
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
-        self.dome = dome
-        self.width = width
-        self.height = height
+        self.render = render
         self._count = itertools.count()
         self.written: list[Path] = []
 
     def __call__(self, exposure_ms: int, state: DeviceState) -> None:
-        image = render_frame(self.dome, self.width, self.height, state.angle_deg,
-                             state.global_level, state.leds, exposure_ms / 1000.0)
+        image = self.render(state, exposure_ms / 1000.0)
         # Unique across processes and restarts: a resumed session must never see a new image
         # under the name of a leftover one.
         name = f"IMG_{time.time_ns()}_{os.getpid()}_{next(self._count):05d}.exr"
