@@ -146,3 +146,20 @@ def test_a_restart_is_detected_from_the_boot_id(device):
         assert (info.value.old_boot, info.value.new_boot) == ("1", "2")
         assert client.status().angle_deg == 0.0  # the restart lost the turn
         client.close()
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "openpty"), reason="POSIX pseudo-terminals")
+def test_round_trip_over_a_pseudo_terminal(device):
+    """The same client on a tty path (termios, raw mode), as with a USB serial port."""
+    from rig.sim.pty_server import SimulatedPtyServer
+
+    device.faults.garble = {3}
+    with SimulatedPtyServer(device) as server:
+        assert server.url.startswith("/dev/")
+        client = _client(server)
+        assert client.connect().name == "sim-dome"
+        client.turn(12.5)
+        client.led(0, 2, 9)
+        assert client.status().lit == {(0, 2): 9}
+        client.close()
+    assert client.retries_used == 1 and device.executed.count("102 LED 0 2 9") == 1

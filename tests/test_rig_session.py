@@ -180,7 +180,7 @@ def test_cli_capture_simulated_and_resumed(tmp_path, capsys):
     args = ["rig", "capture", "--simulate", "--plan", str(plan), "--out", str(out), "--sim-size", "16x12"]
     assert main(args) == 0
     assert "27/27 frames (27 taken now" in capsys.readouterr().out
-    assert main(args) == 0
+    assert main(args + ["--sim-link", "pty"]) == 0
     assert "27/27 frames (0 taken now, 27 before" in capsys.readouterr().out
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["complete"] and "not abs's renderer" in manifest["camera_model"]

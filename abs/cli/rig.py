@@ -37,6 +37,9 @@ def add_parser(sub) -> None:
                      help="simulated frames: 'sphere', a textured Lambertian sphere in numpy "
                      "(milliseconds a frame), or 'abs', a Lambertian box rendered by abs's "
                      "point-light pass (about 0.3 s a frame at 32x24); default %(default)s")
+    cap.add_argument("--sim-link", choices=("socket", "pty"), default="socket",
+                     help="how the simulated controller is reached: a local socket URL or a "
+                     "pseudo-terminal (POSIX); default %(default)s")
     _link_options(cap)
     cap.add_argument("--camera-folder", type=Path, help="folder the camera saves images into "
                      "(required with a real rig)")
@@ -110,7 +113,7 @@ def run_capture(args) -> int:
         boards = max([b for b, _ in plan.leds], default=0) + 1
         per_board = max([i for _, i in plan.leds], default=0) + 1
         sim = SimulatedRig(args.out / "incoming", boards, per_board, width, height,
-                           renderer=args.sim_renderer)
+                           renderer=args.sim_renderer, link=args.sim_link)
         port, folder, model = sim.url, args.out / "incoming", SIMULATED_CAMERA[args.sim_renderer]
     else:
         if not args.port:

@@ -2,6 +2,7 @@
 
 - :mod:`rig.sim.device`: the controller's firmware logic, with fault injection;
 - :mod:`rig.sim.server`: that device on ``socket://127.0.0.1:PORT`` for pyserial;
+- :mod:`rig.sim.pty_server`: or on a pseudo-terminal (``/dev/pts/N``, POSIX);
 - :mod:`rig.sim.optics`: the frames (a textured Lambertian sphere in numpy, not abs's renderer);
 - :mod:`rig.sim.abs_optics`: or frames rendered by abs (a Lambertian box, Mitsuba ray traced);
 - :mod:`rig.sim.camera`: the camera on the controller's remote-release pin.
@@ -13,11 +14,15 @@ camera and runner as real hardware, only the port is a socket URL.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rig.sim.camera import ShutterCamera
 from rig.sim.device import DeviceState, Faults, SimulatedDevice
 from rig.sim.optics import Dome, default_dome, render_frame
 from rig.sim.server import SimulatedRigServer
+
+if TYPE_CHECKING:
+    from rig.sim.pty_server import SimulatedPtyServer
 
 __all__ = ["SimulatedRig", "SimulatedDevice", "Faults", "DeviceState", "SimulatedRigServer",
            "ShutterCamera", "Dome", "default_dome", "render_frame"]
@@ -39,6 +44,8 @@ class SimulatedRig:
     renderer : str
         ``"sphere"`` (numpy, :mod:`rig.sim.optics`, milliseconds a frame) or ``"abs"``
         (:mod:`rig.sim.abs_optics`, about 0.3 s a frame at 32x24).
+    link : str
+        ``"socket"`` (``socket://127.0.0.1:PORT``) or ``"pty"`` (a pseudo-terminal path).
 
     Attributes
     ----------
@@ -48,7 +55,7 @@ class SimulatedRig:
 
     def __init__(self, drop_folder: Path, boards: int = 3, leds_per_board: int = 12,
                  width: int = 32, height: int = 24, faults: Faults | None = None,
-                 renderer: str = "sphere"):
+                 renderer: str = "sphere", link: str = "socket"):
         self.dome = default_dome(boards, leds_per_board)
         if renderer == "sphere":
             def render(state: DeviceState, exposure_s: float):
@@ -62,7 +69,14 @@ class SimulatedRig:
             raise ValueError(f"renderer must be 'sphere' or 'abs', got {renderer!r}")
         self.camera = ShutterCamera(drop_folder, render)
         self.device = SimulatedDevice(boards, leds_per_board, faults, on_shoot=self.camera)
-        self.server = SimulatedRigServer(self.device)
+        if link == "socket":
+            self.server: SimulatedRigServer | SimulatedPtyServer = SimulatedRigServer(self.device)
+        elif link == "pty":
+            from rig.sim.pty_server import SimulatedPtyServer
+
+            self.server = SimulatedPtyServer(self.device)
+        else:
+            raise ValueError(f"link must be 'socket' or 'pty', got {link!r}")
         self.url = self.server.url
 
     def close(self) -> None:
