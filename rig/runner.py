@@ -248,6 +248,9 @@ def run_capture(client: RigClient, camera: Camera, plan: CapturePlan, out: str |
             except DeviceError:
                 pass
         raise
+    except BaseException as exc:  # Ctrl-C, a bug: say so in the session before going down
+        session.event("interrupted", error=type(exc).__name__, message=str(exc))
+        raise
     finally:
         session.write_manifest(complete=complete)
         session.close()
