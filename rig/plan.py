@@ -145,7 +145,8 @@ def _integer(source: Any, field: str, value: Any, low: int, high: int) -> int:
 
 def _exposures(source: Any, field: str, value: Any) -> tuple[float, ...]:
     if not isinstance(value, list) or not value:
-        raise InputError(source, field, f"expected a non-empty list of exposure times in seconds, got {value!r}")
+        raise InputError(source, field, f"expected a non-empty list of exposure times in seconds, "
+                                        f"got {value!r}")
     return tuple(_number(source, f"{field}[{i}]", e, 1e-6, 600.0) for i, e in enumerate(value))
 
 

@@ -6,15 +6,16 @@ Layout::
       manifest.json    the plan, the device, every frame's record, the events (rewritten atomically)
       frames.jsonl     the journal: one line per frame in place (and per event), fsynced
       frames/          p000-global-e0.exr, p000-b00l00-e0.exr, ... (the camera's file type)
+      discarded/       images taken but not proven (rig/runner.py)
       incoming/        the simulated camera's drop folder (real cameras use their own)
 
 Why a journal beside the manifest: a frame must be recorded the moment its file is in place, and
 rewriting a manifest of thousands of frames after each one costs O(n^2) bytes over a session
 (40 positions x (one global frame + 36 LEDs x a 3-exposure bracket) is 4360 frames). Appending
-one fsynced line is O(1). A crash can tear only the last line; :meth:`Session.open` drops a torn line, so a frame is
-either recorded whole or not at all. The manifest is rebuilt from the journal at the end of every
-turntable position and whenever the runner stops, and always describes every recorded frame at
-those points.
+one fsynced line is O(1). A crash can tear only the last line; :meth:`Session.open` drops a torn
+line, so a frame is either recorded whole or not at all. ``manifest.json`` is written when a
+session opens, rebuilt from the journal at the end of every turntable position and whenever the
+runner stops, and then describes every recorded frame.
 
 Order of writing one frame (why none is lost or taken twice): (1) the image is moved into
 ``frames/`` under its frame id (``os.replace``, atomic); (2) the record is appended to the

@@ -7,7 +7,7 @@ import pytest
 
 from rig.client import RigClient, Timing
 from rig.errors import DeviceGarbled, DeviceRefused, DeviceReset, DeviceTimeout
-from rig.sim import Faults, SimulatedDevice, SimulatedRigServer
+from rig.sim import SimulatedDevice, SimulatedRigServer
 from rig.transport import SerialTransport
 from rig.wire import (Command, Reply, WireError, checksum, format_command, format_reply, frame,
                       parse_command, parse_reply)

@@ -60,7 +60,8 @@ def add_parser(sub) -> None:
 
 def _link_options(p) -> None:
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default %(default)s)")
-    p.add_argument("--timeout", type=float, default=0.5, help="wait for a reply, seconds (default %(default)s)")
+    p.add_argument("--timeout", type=float, default=0.5,
+                   help="wait for a reply, seconds (default %(default)s)")
     p.add_argument("--turn-timeout", type=float, default=10.0, help="wait for a turn to finish, "
                    "seconds (default %(default)s)")
     p.add_argument("--retries", type=int, default=3, help="resends after silence or a garbled reply "
