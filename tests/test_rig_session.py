@@ -184,6 +184,15 @@ def test_cli_capture_simulated_and_resumed(tmp_path, capsys):
     assert "27/27 frames (0 taken now, 27 before" in capsys.readouterr().out
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["complete"] and "not abs's renderer" in manifest["camera_model"]
+    # A controller that stops answering: exit status 3, the port and command named; then resume.
+    faulty = ["rig", "capture", "--simulate", "--plan", str(plan), "--out", str(tmp_path / "f"),
+              "--sim-size", "16x12", "--timeout", "0.1", "--retries", "1"]
+    assert main(faulty + ["--sim-fault", "silent@20", "--sim-fault", "garble@5",
+                          "--sim-fault", "reset@12"]) == 3
+    err = capsys.readouterr().err
+    assert "socket://127.0.0.1:" in err and "stopped answering" in err and "run the same command" in err
+    assert main(faulty) == 0
+    assert "27/27 frames" in capsys.readouterr().out
     assert main(["rig", "capture", "--port", "socket://127.0.0.1:1", "--plan", str(plan), "--out",
                  str(tmp_path / "x"), "--camera-folder", str(tmp_path / "cf")]) == 3
     assert "socket://127.0.0.1:1" in capsys.readouterr().err

@@ -37,6 +37,10 @@ def add_parser(sub) -> None:
                      help="simulated frames: 'sphere', a textured Lambertian sphere in numpy "
                      "(milliseconds a frame), or 'abs', a Lambertian box rendered by abs's "
                      "point-light pass (about 0.3 s a frame at 32x24); default %(default)s")
+    cap.add_argument("--sim-fault", action="append", metavar="KIND@N",
+                     help="inject a fault into the simulated controller at its N-th received line: "
+                     "silent@N (stops answering), garble@N (that reply garbled), reset@N (restarts "
+                     "before it); repeatable")
     cap.add_argument("--sim-link", choices=("socket", "pty"), default="socket",
                      help="how the simulated controller is reached: a local socket URL or a "
                      "pseudo-terminal (POSIX); default %(default)s")
@@ -87,6 +91,23 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _faults(specs: list[str] | None):
+    from abs.errors import InputError
+    from rig.sim import Faults
+
+    faults = Faults()
+    for spec in specs or []:
+        kind, _, n = spec.partition("@")
+        if kind not in ("silent", "garble", "reset") or not n.isdigit() or int(n) < 1:
+            raise InputError(None, "--sim-fault", f"expected silent@N, garble@N or reset@N with "
+                             f"N >= 1, got {spec!r}")
+        if kind == "silent":
+            faults.silent_from = int(n)
+        else:
+            (faults.garble if kind == "garble" else faults.reset_at).add(int(n))
+    return faults
+
+
 def _device_error(command: str, exc: Exception, resumable: bool) -> int:
     print(f"abs rig {command}: error: {exc}", file=sys.stderr)
     if resumable:
@@ -114,7 +135,8 @@ def run_capture(args) -> int:
         boards = max([b for b, _ in plan.leds], default=0) + 1
         per_board = max([i for _, i in plan.leds], default=0) + 1
         sim = SimulatedRig(args.out / "incoming", boards, per_board, width, height,
-                           renderer=args.sim_renderer, link=args.sim_link)
+                           faults=_faults(args.sim_fault), renderer=args.sim_renderer,
+                           link=args.sim_link)
         port, folder, model = sim.url, args.out / "incoming", SIMULATED_CAMERA[args.sim_renderer]
     else:
         if not args.port:
@@ -122,6 +144,8 @@ def run_capture(args) -> int:
         if args.camera_folder is None:
             raise InputError(None, "--camera-folder", "required with a real rig: the folder the "
                              "camera saves its images into")
+        if args.sim_fault:
+            raise InputError(None, "--sim-fault", "only with --simulate")
         port, folder, model = args.port, args.camera_folder, "camera"
     try:
         client = _client(args, port)
