@@ -188,3 +188,16 @@ def test_the_documented_contract_matches_the_code():
     for text in (doc, (root / "rig" / "README.md").read_text(encoding="utf-8")):
         block = re.search(r"```json\n(.*?)```", text, flags=re.S).group(1)
         assert plan_from_dict(json.loads(block)).frames()
+
+
+def test_cli_identify(device, capsys):
+    from abs.cli.main import main
+
+    with SimulatedRigServer(device) as server:
+        assert main(["rig", "identify", "--port", server.url]) == 0
+        out = capsys.readouterr().out
+        device.faults.silent_from = device.received + 1
+        assert main(["rig", "identify", "--port", server.url, "--timeout", "0.05", "--retries", "0"]) == 3
+    assert "sim-dome, firmware sim-1.0, 2 boards x 4 LEDs" in out and "turntable 0 deg" in out
+    err = capsys.readouterr().err
+    assert server.url in err and "ID" in err and "run the same command" not in err
