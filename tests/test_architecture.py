@@ -119,3 +119,28 @@ def test_the_picture_shows_every_package_of_the_table():
     shown = set(re.findall(r">([A-Za-z_][A-Za-z0-9_]*)</text>", PICTURE.read_text(encoding="utf-8")))
     missing = sorted(set(layers) - shown)
     assert not missing, f"docs/architecture.svg lacks {missing}: run python docs/architecture_picture.py"
+
+
+def _top_level_imports(path: Path) -> set[str]:
+    """Every imported module name in ``path`` (absolute imports only, functions included)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            names |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names.add(node.module)
+            if node.module == "abs":
+                names |= {f"abs.{alias.name}" for alias in node.names}
+    return names
+
+
+def test_rig_builds_on_abs_and_only_abs_rig_imports_it():
+    """rig/ sits outside abs/, above every layer but cli (docs/architecture.md, "Outside abs/"):
+    it imports no abs.cli, and of abs/ only abs/cli/rig.py imports it."""
+    rig = ROOT / "rig"
+    up = [f"{p.relative_to(ROOT)}: {name}" for p in sorted(rig.rglob("*.py"))
+          for name in _top_level_imports(p) if name == "abs.cli" or name.startswith("abs.cli.")]
+    assert not up, f"rig/ imports the command line: {up}"
+    down = [str(p.relative_to(ROOT)) for p in sorted(PACKAGE.rglob("*.py"))
+            if any(n == "rig" or n.startswith("rig.") for n in _top_level_imports(p))]
+    assert down in ([], ["abs/cli/rig.py"]), f"only abs/cli/rig.py may import rig: {down}"
