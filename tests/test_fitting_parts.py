@@ -156,6 +156,25 @@ def test_refinement_averages_points_that_scatter_beyond_the_trust_radius():
     assert np.all(np.abs(state.z - exact) < 1.0), state.z - exact
 
 
+def test_refinement_that_has_arrived_keeps_averaging_through_late_clipped_steps():
+    """Two late steps clipped in the same direction (noise, after the walk has arrived) must not
+    reduce the average to the last point."""
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    # A Newton step from z lands on exact - offset: small alternating noise, then two far ones.
+    offsets = [0.3 * (-1) ** k * np.ones(3) for k in range(10)] + [np.full(3, -3.0)] * 2
+
+    def steered(z, it):
+        return A @ z - y + A @ offsets[len(seen) - 1], (A, A), 0.0
+
+    seen = []
+    state = gauss_newton_refinement(lambda z, it: (seen.append(it), steered(z, it))[1],
+                                    OptimizerState("lm", 0, exact.copy()), steps=12)
+    clipped = state.solver.refinement.clipped
+    assert not any(clipped[-3:]), clipped
+    assert np.all(np.abs(state.z - exact) < 0.6), state.z - exact
+
+
 def test_cross_curvature_is_unbiased_where_the_self_product_is_not():
     rng = np.random.default_rng(0)
     J = rng.normal(size=(200, 3))

@@ -292,8 +292,8 @@ def _turned_back(points: list) -> bool:
 def averaged_refinement_points(points: list, travelling: list | None = None) -> np.ndarray:
     """The refinement points that are averaged: all but the first quarter (at least the first
     one), which may still be travelling from the biased start, and none reached while travelling
-    (``travelling``, one flag per point: a step clipped in the previous step's direction, or a
-    coordinate whose steps have not yet turned back); full Newton steps usually arrive within a step or two, after
+    (``travelling``, one flag per point, which :func:`gauss_newton_refinement` clears for good
+    once the walk has arrived); full Newton steps usually arrive within a step or two, after
     which the points scatter independently around the unbiased solution. When every step was
     clipped, the last point alone."""
     points = np.asarray(points, np.float64)
@@ -361,15 +361,17 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
             radius = np.where(clipped_before & same, 2.0 * radius,
                               np.where(~same, np.maximum(max_step, radius / 2.0), radius))
         clipped_before = np.abs(step) > radius
-        # Travelling: a clipped step that keeps the previous step's direction. A clipped step
-        # that turns back is noise around the solution (full Newton steps on fresh renders
-        # scatter by a typical step or more at 64 spp through glass), and those points are the
-        # ones to average.
+        # Travelling: a clipped step that keeps the previous step's direction, or a coordinate
+        # that has not yet turned back. Once arrived, the walk stays arrived: later clipped
+        # steps are noise around the solution (full Newton steps on fresh renders scatter by a
+        # typical step or more at 64 spp through glass), and flagging them had left only the
+        # last point to average when one of five coordinates was clipped twice in a row there.
         onward = clipped_before if previous is None else clipped_before & same
         step = np.clip(step, -radius, radius)
         z = z + step
         points.append(z)
-        travelling.append(bool(onward.any()) or not _turned_back(points))
+        arrived = bool(travelling) and not travelling[-1]
+        travelling.append(not arrived and (bool(onward.any()) or not _turned_back(points)))
         previous = step
         solver = replace(solver, refinement=RefinementState(tuple(points), tuple(travelling),
                                                             radius.copy(), step))
