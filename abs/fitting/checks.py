@@ -82,7 +82,9 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
             hit = _at_bound(float(v), lower, upper)
             if hit:
                 checks.append(f"{name}[{i}] = {v:.4g} sits at its {hit}: the optimum lies at or "
-                              "beyond it, so the value and its error mean little.")
+                              "beyond it, so the standard error is no symmetric interval. If the "
+                              "bound is physical (an absorption of 0: clear glass) the value may "
+                              "be right; otherwise the model or the start is wrong.")
         plausible = PLAUSIBLE_RANGES.get(kinds.get(name, ("", "")))
         if plausible is not None:
             outside = [(i, v) for i, v in enumerate(values) if not plausible[0] <= v <= plausible[1]]
