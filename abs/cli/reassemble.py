@@ -62,6 +62,8 @@ def add_parser(sub) -> None:
     q.add_argument("--material", help="material of a new object (or to change an existing one's)")
     q.add_argument("--soft", help="soft object to push below the placed one (e.g. cloth); "
                                   "default: no deformation")
+    q.add_argument("--max-edge", type=float, default=2.0,
+                   help="refine the soft mesh to edges of at most this, mm")
     q.add_argument("--rounds", type=int, default=4, help="sqrt(3)-subdivision + decimation rounds")
     q.add_argument("--work", type=Path, help="folder for the intermediate files "
                                              "(default: <out folder>/reassembly)")
@@ -330,6 +332,6 @@ def _run_pipeline(args) -> int:
     if args.soft:
         print("== deform")
         _run_step(["deform", "--scene", str(args.out), "--hard", args.object, "--soft", args.soft,
-                   "--out", str(args.out)])
+                   "--max-edge", str(args.max_edge), "--out", str(args.out)])
     print(f"placed {args.object} -> {args.out} (intermediate files in {work})")
     return 0
