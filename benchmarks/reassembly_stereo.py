@@ -113,6 +113,7 @@ def run(width: int, spp: int, seed: int, keep: Path | None) -> dict:
         keep.mkdir(parents=True, exist_ok=True)
         for i, im in enumerate(images):
             write_png(keep / f"stereo_cam{i}.png", im)
+            np.save(keep / f"stereo_cam{i}_{width}_{spp}_{seed}.npy", im)
     start = time.perf_counter()
     views = [MarkerImage(f"cam{i}", f"cam{i}", *cam, detect_circles(im)) for i, (cam, im) in enumerate(zip(cams, images))]
     glass = trimesh.creation.icosphere(5, radius=GLASS_R).apply_translation(CENTRE)

@@ -41,8 +41,8 @@ class Circles:
     radii_px : np.ndarray
         ``(n,)`` radii, pixels.
     contrast : np.ndarray
-        ``(n,)`` ring level minus disc level, as a fraction of the image's 99.5th percentile
-        (positive for a dark marker on a light ground).
+        ``(n,)`` ``(ring - disc) / ring`` (linear levels; negative for a light disc found with
+        ``polarity="light"``).
     """
 
     centres_px: np.ndarray
@@ -89,11 +89,12 @@ def _hough(grey8: np.ndarray, s: float) -> np.ndarray:
     """``(k, 3)`` circles ``(u, v, r)`` in image pixels found at resampling factor ``s``."""
     interp = cv2.INTER_LINEAR if s > 1 else cv2.INTER_AREA
     level = grey8 if s == 1 else cv2.resize(grey8, None, fx=s, fy=s, interpolation=interp)
-    # sigma 1.2 px of the level: enough to keep noise from the edge map (at 0.8 the transform
-    # took minutes on a noisy 2560x1920 image), small against a marker of 8 px.
-    level = cv2.GaussianBlur(level, (0, 0), 1.2)
-    # param1: Canny high threshold on the stretched 8-bit image; param2: circle "perfectness"
-    # (1 = perfect); 0.6 keeps small, pixelated discs that 0.8 lost.
+    # sigma 1.2 px of the level, and at least one image pixel: enough to keep noise from the
+    # edge map (at 0.8 px the transform took minutes on a noisy 2560x1920 image, and 20 s on the
+    # doubled level of a noisy rendering at 1.2 px), small against a marker of 8 px.
+    level = cv2.GaussianBlur(level, (0, 0), max(1.2, s))
+    # param1: Canny high threshold on the 8-bit image; param2: circle "perfectness" (1 =
+    # perfect); 0.6 keeps small, pixelated discs that 0.8 lost.
     found = cv2.HoughCircles(level, cv2.HOUGH_GRADIENT_ALT, dp=1, minDist=_BAND[0], param1=200,
                              param2=0.6, minRadius=_BAND[0], maxRadius=_BAND[1])
     if found is None:
@@ -104,36 +105,47 @@ def _hough(grey8: np.ndarray, s: float) -> np.ndarray:
 
 
 def _refine(grey: np.ndarray, u: float, v: float, r: float) -> tuple[float, float, float, float]:
-    """Centroid and area radius of the marker's darkness near ``(u, v, r)``; its contrast."""
+    """Centroid and area radius of the marker's darkness near ``(u, v, r)``, and its contrast
+    ``(ring - disc) / ring``; the contrast is 0 when the ring is not clean.
+
+    ``grey`` is linear (a partly covered pixel is the linear mix of marker and ground). A ring
+    (1.5 to 2 r) of which more than a tenth is darker than half-way to the disc is not clean: the
+    disc touches another dark thing (another marker, the dark rim of a glass silhouette), which
+    would pull the centroid (measured: 5 px on a rendered marker at the sphere's rim).
+    """
     h, w = grey.shape
     half = int(np.ceil(2.2 * r)) + 2
     x0, x1 = max(int(u) - half, 0), min(int(u) + half + 1, w)
     y0, y1 = max(int(v) - half, 0), min(int(v) + half + 1, h)
     patch = grey[y0:y1, x0:x1]
     yy, xx = np.mgrid[y0:y1, x0:x1]
+    contrast = 0.0
     for _ in range(2):  # the second pass starts from the refined centre
         d = np.hypot(xx - u, yy - v)
         disc, ring = patch[d <= 0.5 * r], patch[(d >= 1.5 * r) & (d <= 2.0 * r)]
         if disc.size == 0 or ring.size == 0:
             return u, v, r, 0.0
         inside, outside = np.median(disc), np.median(ring)
-        contrast = float(outside - inside)
-        if contrast <= 0:
-            return u, v, r, contrast
+        step = float(outside - inside)
+        if step <= 0 or outside <= 0:
+            return u, v, r, 0.0
+        if np.mean(ring < inside + 0.5 * step) > 0.1:
+            return u, v, r, 0.0
+        contrast = step / float(outside)
         # coverage 0.25 -> 0, 0.75 -> 1, linear between: symmetric about half coverage, so an
         # edge keeps its area, while ground texture darker than the ring by less than a quarter
-        # of the contrast (measured: it pulled a 60 px centre by 1 px) adds nothing.
-        weight = np.clip(2.0 * (outside - patch) / contrast - 0.5, 0.0, 1.0) * (d <= 1.4 * r)
+        # of the step (measured: it pulled a 60 px centre by 1 px) adds nothing.
+        weight = np.clip(2.0 * (outside - patch) / step - 0.5, 0.0, 1.0) * (d <= 1.4 * r)
         total = weight.sum()
         if total <= 0:
-            return u, v, r, contrast
+            return u, v, r, 0.0
         u, v = float((weight * xx).sum() / total), float((weight * yy).sum() / total)
         r = float(np.sqrt(total / np.pi))
     return u, v, r, contrast
 
 
 def detect_circles(image: np.ndarray, *, radius_px: tuple[float, float | None] = (4.0, None),
-                   polarity: str = "dark", min_contrast: float = 0.25) -> Circles:
+                   polarity: str = "dark", min_contrast: float = 0.5) -> Circles:
     """Circular markers of any size in ``image``.
 
     Parameters
@@ -147,9 +159,10 @@ def detect_circles(image: np.ndarray, *, radius_px: tuple[float, float | None] =
     polarity : {"dark", "light", "any"}
         Keep dark discs on a lighter ground (markers of a dark material), light ones, or both.
     min_contrast : float
-        Least difference between the ring around a disc and the disc, as a fraction of the
-        image's 99.5th percentile (about the ground's brightness): rejects circles the Hough
-        transform finds in texture.
+        Least ``(ring - disc) / ring`` (linear levels, the ring 1.5 to 2 radii around the
+        disc): a dark marker reflects a few percent of what the ground does, so its contrast is
+        near 1; rejects circles the Hough transform finds in texture. Detections whose ring is
+        not clean (touching another dark thing) are rejected too.
 
     Returns
     -------
@@ -161,7 +174,10 @@ def detect_circles(image: np.ndarray, *, radius_px: tuple[float, float | None] =
     grey = to_grey(image)
     r_min = max(float(radius_px[0]), 4.0)
     r_max = float(radius_px[1]) if radius_px[1] is not None else min(grey.shape) / 4
-    grey8 = np.round(grey * 255).astype(np.uint8)
+    # edges are found on a gamma-encoded image (as sRGB, 1/2.2), so that a marker on a dark part
+    # of the scene (the glass, measured on a rendering) still has edges above the Canny threshold;
+    # the centres are refined on the linear image
+    grey8 = np.round(grey ** (1 / 2.2) * 255).astype(np.uint8)
     found = [_hough(grey8, s) for s in _levels(grey.shape, r_min, r_max)]
     candidates = np.vstack(found) if found else np.zeros((0, 3))
     inverted = 1.0 - grey
@@ -169,7 +185,7 @@ def detect_circles(image: np.ndarray, *, radius_px: tuple[float, float | None] =
     for u, v, r in candidates:
         flip = polarity == "light"
         u2, v2, r2, c = _refine(inverted if flip else grey, u, v, r)
-        if polarity == "any" and c < 0:
+        if polarity == "any" and c <= 0:
             flip = True
             u2, v2, r2, c = _refine(inverted, u, v, r)
         if c < min_contrast or not r_min <= r2 <= r_max:
