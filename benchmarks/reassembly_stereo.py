@@ -5,9 +5,10 @@ triangulated, checked for being seen through the glass and placed onto the CT ma
 
 The truth: ``MARKERS`` markers (radius 1.5 mm, centres 0.75 mm outside the 40 mm sphere of
 ``scenes/default/sphere.ply``, diffuse reflectance 0.02) at random directions of the object frame
-(at least 0.5 rad apart), the object frame mapped to the world by a random rotation about the
-sphere's centre (0, 0.04, 0) m; directions that would put a marker within 15 mm of the cloth are
-drawn again (a marker cannot sit under the sphere). The CT centres given to the placement are the
+(at least 0.5 rad apart), the object frame mapped to the world by a rotation about the sphere's
+centre (0, 0.04, 0) m that turns the markers' mean direction towards the cameras, then by a random
+angle about it (see ``layout``); layouts with a marker within 15 mm of the cloth are drawn again
+(a marker cannot sit under the sphere). The CT centres given to the placement are the
 true object-frame centres (the CT step's own error is measured by ``benchmarks/reassembly.py``:
 0.016 mm at 0.2 mm voxels). The glass given to the seen-through-glass check is the sphere itself
 (the CT mesh placed by a first placement stands in for it in the pipeline).
@@ -43,7 +44,7 @@ from abs.reassembly.stereo_markers import MarkerImage, locate_markers
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "scenes" / "default"
 RESULTS = ROOT / "benchmarks" / "results" / "reassembly_stereo.json"
-MARKERS = 7
+MARKERS = 8
 MARKER_R = 1.5e-3
 GLASS_R = 0.04
 CENTRE = np.array([0.0, 0.04, 0.0])
@@ -54,11 +55,19 @@ SEED_TARGET_MM = 0.43
 
 def layout(seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Object-frame marker centres (metres, sphere centre at the origin) and the object's
-    rotation; no marker within 15 mm of the cloth."""
+    rotation.
+
+    The markers are glued at random; the object is turned so that their mean direction faces
+    the cameras (as one glues markers where the cameras will see them), then by a random angle
+    about that direction. Layouts with a marker within 15 mm of the cloth are drawn again.
+    """
     rng = np.random.default_rng(seed)
-    R = Rotation.random(random_state=seed).as_matrix()
+    towards = (EYES[0] + EYES[1]) / 2 - CENTRE
+    towards /= np.linalg.norm(towards)
     while True:
         dirs = random_directions(MARKERS, rng, 0.5)
+        facing, _ = Rotation.align_vectors([towards], [dirs.mean(axis=0)])
+        R = (Rotation.from_rotvec(rng.uniform(0, 2 * np.pi) * towards) * facing).as_matrix()
         world = dirs @ R.T * (GLASS_R + 0.5 * MARKER_R) + CENTRE
         if world[:, 1].min() > 0.015:
             return dirs * (GLASS_R + 0.5 * MARKER_R), R

@@ -109,7 +109,9 @@ def _refine(grey: np.ndarray, u: float, v: float, r: float) -> tuple[float, floa
     ``(ring - disc) / ring``; the contrast is 0 when the ring is not clean.
 
     ``grey`` is linear (a partly covered pixel is the linear mix of marker and ground). A ring
-    (1.5 to 2 r) of which more than a tenth is darker than half-way to the disc is not clean: the
+    (1.5 to 2 r) of which more than 15 % is darker than a quarter of the way from the disc to the
+    ring's median is not clean (a noisy rendering of a dark ground passes; at half-way and 10 %
+    it did not): the
     disc touches another dark thing (another marker, the dark rim of a glass silhouette), which
     would pull the centroid (measured: 5 px on a rendered marker at the sphere's rim).
     """
@@ -129,7 +131,7 @@ def _refine(grey: np.ndarray, u: float, v: float, r: float) -> tuple[float, floa
         step = float(outside - inside)
         if step <= 0 or outside <= 0:
             return u, v, r, 0.0
-        if np.mean(ring < inside + 0.5 * step) > 0.1:
+        if np.mean(ring < inside + 0.25 * step) > 0.15:
             return u, v, r, 0.0
         contrast = step / float(outside)
         # coverage 0.25 -> 0, 0.75 -> 1, linear between: symmetric about half coverage, so an
