@@ -116,8 +116,9 @@ def _pair_points(a: MarkerImage, b: MarkerImage, tol_px: float, glass, glass_mar
         if not in_front[k]:
             report["dropped"].append({**source, "why": "behind a camera"})
         elif behind_glass[k].any():
+            seen_by = [n for n, f in zip(names, behind_glass[k]) if f]
             report["through_glass"].append({**source, "point_m": points[k].tolist(),
-                                            "seen_through_glass_by": [n for n, f in zip(names, behind_glass[k]) if f]})
+                                            "seen_through_glass_by": seen_by})
         else:
             out.append((points[k], float(error[k]), source))
     return out

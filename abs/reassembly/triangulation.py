@@ -28,7 +28,8 @@ def projection_matrix(K: np.ndarray, R: np.ndarray, t: np.ndarray) -> np.ndarray
                                                         np.asarray(t, np.float64).reshape(3)])
 
 
-def triangulate(cam1: tuple, cam2: tuple, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def triangulate(cam1: tuple, cam2: tuple, x1: np.ndarray,
+                x2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Triangulate matched pixels of two cameras.
 
     Parameters
@@ -122,5 +123,6 @@ def cluster_points(points: np.ndarray, error_px: np.ndarray, *, merge_m: float =
         far = np.linalg.norm(points[members] - centre, axis=1) > outlier_m
         inliers = members[~far] if (~far).any() else members
         best = inliers[np.argmin(error_px[inliers])]
-        out.append(MarkerCluster(int(best), points[best].copy(), float(error_px[best]), members, members[far]))
+        out.append(MarkerCluster(int(best), points[best].copy(), float(error_px[best]), members,
+                                 members[far]))
     return out
