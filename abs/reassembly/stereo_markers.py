@@ -74,7 +74,7 @@ class StereoMarkers:
     sources : list of dict
         Per marker: the camera pair and the detections its point was triangulated from, and how
         many points its cluster held (``{"cameras": [a, b], "pixels": [[u, v], [u, v]],
-        "points": k}``).
+        "detections": [i, j], "points": k}``).
     ambiguous : list of dict
         Detections left out because several detections of the other image lie on their epipolar
         line: ``{"cameras": [a, b], "left": i, "right": [j, ...]}`` (or the mirror).
