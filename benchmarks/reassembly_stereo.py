@@ -148,7 +148,10 @@ def run(width: int, spp: int, seed: int, keep: Path | None) -> dict:
             out["residuals_mm"] = p.residuals_mm.tolist()
             out["rotation_error_deg"] = float(np.degrees(Rotation.from_matrix(p.R @ R0.T).magnitude()))
             out["translation_error_mm"] = float(np.linalg.norm(p.t - t0) * 1e3)
-            out["pairs_right"] = bool(np.allclose(np.linalg.norm(found.points_m[p.pairs[:, 0]] - world[p.pairs[:, 1]], axis=1), 0, atol=1e-3))
+            # right: each measured marker paired with the CT marker whose true position is nearest
+            nearest = np.argmin(np.linalg.norm(found.points_m[:, None] - world[None], axis=2), axis=1)
+            out["pairs"] = p.pairs.tolist()
+            out["pairs_right"] = bool(np.all(nearest[p.pairs[:, 0]] == p.pairs[:, 1]))
     return out
 
 
@@ -158,8 +161,9 @@ def markdown(rows: list[dict]) -> str:
              f"about 0.45 m away (vertical field of view {FOV_DEG:g} deg), rendered by abs's path "
              "tracer (Mitsuba, CPU). Seed's target: mean marker distance 0.43 mm.", "",
              "| size, spp, seed | render | detections | triangulated / ambiguous / through glass | "
-             "distance from truth mean / max | mean marker distance | rotation / translation error |",
-             "|---|---|---|---|---|---|---|"]
+             "distance from truth mean / max | mean marker distance | pairing right | "
+             "rotation / translation error |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
         dist = r.get("truth_distance_mm", [np.nan])
         placed = (f"{r['mean_marker_distance_mm']:.3f} mm" if "mean_marker_distance_mm" in r
@@ -168,7 +172,8 @@ def markdown(rows: list[dict]) -> str:
                if "rotation_error_deg" in r else "-")
         lines.append(f"| {r['width']}x{r['height']}, {r['spp']}, {r['seed']} | {r['render_s']:.0f} s | "
                      f"{' / '.join(map(str, r['detections']))} | {r['triangulated']} / {r['ambiguous']} / "
-                     f"{r['through_glass']} | {np.mean(dist):.3f} / {np.max(dist):.3f} mm | {placed} | {err} |")
+                     f"{r['through_glass']} | {np.mean(dist):.3f} / {np.max(dist):.3f} mm | {placed} | "
+                     f"{r.get('pairs_right', '-')} | {err} |")
     return "\n".join(lines) + "\n"
 
 
