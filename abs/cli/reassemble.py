@@ -201,7 +201,7 @@ def _world_mesh(obj):
     mesh = trimesh.load(obj.mesh, force="mesh", process=False)
     if np.any(np.asarray(obj.pose) != 0):
         raise InputError(None, f"objects.{obj.name}.pose",
-                         "deform uses to_world only; fold the pose into to_world first")
+                         "deform and the glass check use to_world only; fold the pose into to_world first")
     mesh.apply_transform(np.asarray(obj.to_world, dtype=np.float64))
     return mesh
 
