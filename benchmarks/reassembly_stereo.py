@@ -183,6 +183,7 @@ def main() -> None:
     parser.add_argument("--spp", type=int, default=32)
     parser.add_argument("--seed", type=int, nargs="+", default=[0])
     parser.add_argument("--keep-images", type=Path, help="write the renderings as PNG here")
+    parser.add_argument("--results", type=Path, default=RESULTS, help="JSON to write (and .md beside it)")
     args = parser.parse_args()
     rows = []
     for width in args.width:
@@ -190,9 +191,9 @@ def main() -> None:
             row = run(width, args.spp, seed, args.keep_images)
             print(json.dumps(row))
             rows.append(row)
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=1) + "\n")
-    RESULTS.with_suffix(".md").write_text(markdown(rows))
+    args.results.parent.mkdir(parents=True, exist_ok=True)
+    args.results.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=1) + "\n")
+    args.results.with_suffix(".md").write_text(markdown(rows))
     print(markdown(rows))
 
 
