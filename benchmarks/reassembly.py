@@ -18,7 +18,8 @@ Per voxel size:
 - ``placement``: the CT marker centres found by the meshing are placed onto the *true* marker
   centres moved by a random rigid transform (rotation uniform, the object centre at the scene
   sphere's (0, 0.04, 0) m) plus Gaussian noise of sd ``sigma`` per axis, standing in for stereo
-  triangulation (not built yet), one marker dropped in half the trials. Automatic pairing, Kabsch;
+  triangulation (measured on renderings by benchmarks/reassembly_stereo.py), one marker dropped
+  in half the trials. Automatic pairing, Kabsch;
   mean marker distance (mm; the seed reached 0.43 mm on its teapot), rotation error (deg), error
   of the translation of ``to_world`` and of the object centre's placement (mm), 20 trials per
   sigma. The mean marker distance is dominated by the assumed sigma: it checks that the pairing

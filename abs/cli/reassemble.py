@@ -1,14 +1,18 @@
-"""``abs reassemble mesh|place|deform``: put glass scanned in a CT back into its scene.
+"""``abs reassemble mesh|markers|place|deform|pipeline``: put glass scanned in a CT back into
+its scene.
 
 ``mesh`` turns a CT volume into the cleaned glass mesh and the marker spheres (``glass.ply`` in
-metres, ``markers.json`` in mm); ``place`` pairs markers measured in the scene (metres, world
-frame) with the CT markers, solves the rigid transform and writes the object's ``to_world`` into
-a scene file; ``deform`` pushes a soft object (the tablecloth) below a hard one where it would
-poke through. See docs/reassembly.md.
+metres, ``markers.json`` in mm); ``markers`` finds the markers in two calibrated photographs and
+triangulates them (``markers_world.json``, metres, world frame); ``place`` pairs markers measured
+in the scene with the CT markers, solves the rigid transform and writes the object's
+``to_world`` into a scene file; ``deform`` pushes a soft object (the tablecloth) below a hard one
+where it would poke through; ``pipeline`` runs them in that order, each as its own command would.
+See docs/reassembly.md.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 from pathlib import Path
 
@@ -37,6 +41,34 @@ def add_parser(sub) -> None:
     q.add_argument("--min-faces", type=int, default=2000, help="the decimation keeps at least this many")
     q.add_argument("--rounds", type=int, default=4, help="sqrt(3)-subdivision + decimation rounds")
     q.set_defaults(run=_run_mesh)
+
+    q = steps.add_parser("markers", help="markers in two calibrated photographs, triangulated "
+                                         "(world frame, metres)")
+    q.add_argument("left", type=Path, help="left photograph")
+    q.add_argument("right", type=Path, help="right photograph")
+    _marker_options(q)
+    q.add_argument("--out", type=Path, required=True, help="markers_world.json to write")
+    q.set_defaults(run=_run_markers)
+
+    q = steps.add_parser("pipeline", help="volume + stereo photographs -> object placed in a scene "
+                                          "(mesh, markers, place, deform)")
+    q.add_argument("volume", type=Path, help="JSON header of a raw volume, or a folder of slices")
+    q.add_argument("--voxel-size", type=float, help="voxel size of a slice folder, mm")
+    q.add_argument("--left", type=Path, required=True, help="left photograph")
+    q.add_argument("--right", type=Path, required=True, help="right photograph")
+    _marker_options(q, glass=False)
+    q.add_argument("--scene", type=Path, required=True, help="scene file to place the object in")
+    q.add_argument("--object", required=True, help="object name (existing or new)")
+    q.add_argument("--material", help="material of a new object (or to change an existing one's)")
+    q.add_argument("--soft", help="soft object to push below the placed one (e.g. cloth); "
+                                  "default: no deformation")
+    q.add_argument("--max-edge", type=float, default=2.0,
+                   help="refine the soft mesh to edges of at most this, mm")
+    q.add_argument("--rounds", type=int, default=4, help="sqrt(3)-subdivision + decimation rounds")
+    q.add_argument("--work", type=Path, help="folder for the intermediate files "
+                                             "(default: <out folder>/reassembly)")
+    q.add_argument("--out", type=Path, required=True, help="scene file to write")
+    q.set_defaults(run=_run_pipeline)
 
     q = steps.add_parser("place", help="pair measured markers with the CT markers, write to_world")
     q.add_argument("markers", type=Path, help="markers.json (or its folder) from `reassemble mesh`")
@@ -67,6 +99,27 @@ def add_parser(sub) -> None:
     q.add_argument("--out", type=Path, required=True,
                    help="scene file to write (the deformed mesh goes beside it)")
     q.set_defaults(run=_run_deform)
+
+
+def _marker_options(q, glass: bool = True) -> None:
+    q.add_argument("--cameras", type=Path, required=True, help="cameras.json (or its capture folder)")
+    q.add_argument("--left-camera", required=True, help="view name of the left photograph's camera")
+    q.add_argument("--right-camera", required=True, help="view name of the right photograph's camera")
+    q.add_argument("--tol-px", type=float, default=1.5,
+                   help="largest Sampson distance of a stereo match, px")
+    q.add_argument("--radius-px", type=float, nargs=2, metavar=("MIN", "MAX"),
+                   help="marker radii in the photographs, px (default: 4 to a quarter of the image)")
+    q.add_argument("--merge-mm", type=float, default=1.0,
+                   help="triangulated points closer than this are one marker, mm")
+    q.add_argument("--outlier-mm", type=float, default=0.5,
+                   help="drop a point further than this from its marker's median, mm")
+    if glass:
+        q.add_argument("--glass-scene", type=Path,
+                       help="scene file holding the glass object at a guessed placement: markers a "
+                            "camera sees through it are left out")
+        q.add_argument("--glass-object", help="the glass object's name in --glass-scene")
+        q.add_argument("--glass-margin-mm", type=float, default=2.0,
+                       help="a ray crossing the glass closer than this to the marker is not counted, mm")
 
 
 def _run_mesh(args) -> int:
@@ -143,7 +196,7 @@ def _world_mesh(obj):
     mesh = trimesh.load(obj.mesh, force="mesh", process=False)
     if np.any(np.asarray(obj.pose) != 0):
         raise InputError(None, f"objects.{obj.name}.pose",
-                         "deform uses to_world only; fold the pose into to_world first")
+                         "deform and the glass check use to_world only; fold the pose into to_world first")
     mesh.apply_transform(np.asarray(obj.to_world, dtype=np.float64))
     return mesh
 
@@ -166,4 +219,114 @@ def _run_deform(args) -> int:
     out = place_object_in_scene(args.scene, args.out, args.soft, np.eye(4), mesh_path)
     print(f"{len(result.moved)} of {len(soft.vertices)} soft vertices pushed, at most "
           f"{result.max_push * 1e3:.3f} mm -> {out}")
+    return 0
+
+
+def _marker_image(image: Path, capture, name: str, args):
+    from abs.io.images import read_image
+    from abs.reassembly.circles import detect_circles
+    from abs.reassembly.stereo_markers import MarkerImage
+
+    try:
+        view = capture.view(name)
+    except KeyError:
+        raise InputError(capture.source, "views", f"no view named {name!r}; views are "
+                                                  f"{', '.join(capture.names)}") from None
+    if not image.is_file():
+        raise InputError(image, "", "photograph not found")
+    pixels = read_image(image)
+    if pixels.shape[:2] != (view.height, view.width):
+        raise InputError(image, "", f"is {pixels.shape[1]}x{pixels.shape[0]} pixels, but camera "
+                                    f"{name!r} of {capture.source} was calibrated at "
+                                    f"{view.width}x{view.height}")
+    radius = tuple(args.radius_px) if args.radius_px else (4.0, None)
+    return MarkerImage(name, str(image), view.K, view.R, view.t, detect_circles(pixels, radius_px=radius))
+
+
+def _run_markers(args) -> int:
+    from abs.io.capture import load_capture
+    from abs.reassembly.stereo_markers import locate_markers
+    from abs.scene import load_scene
+
+    capture = load_capture(args.cameras)
+    images = [_marker_image(args.left, capture, args.left_camera, args),
+              _marker_image(args.right, capture, args.right_camera, args)]
+    glass = None
+    if args.glass_scene is not None or args.glass_object is not None:
+        if args.glass_scene is None or args.glass_object is None:
+            raise InputError(None, "--glass-scene", "give both --glass-scene and --glass-object")
+        try:
+            glass = _world_mesh(load_scene(args.glass_scene).object(args.glass_object))
+        except KeyError:
+            raise InputError(args.glass_scene, "objects", f"no object {args.glass_object!r}") from None
+    result = locate_markers(images, tol_px=args.tol_px, merge_m=args.merge_mm * 1e-3,
+                            outlier_m=args.outlier_mm * 1e-3, glass=glass,
+                            glass_margin_m=args.glass_margin_mm * 1e-3)
+    report = {"points_m": result.points_m.tolist(),
+              "reprojection_error_px": result.error_px.tolist(),
+              "sources": result.sources, "ambiguous": result.ambiguous,
+              "through_glass": result.through_glass, "dropped": result.dropped,
+              "images": {m.name: m.image for m in images},
+              "detections_px": {m.name: np.column_stack([m.circles.centres_px, m.circles.radii_px]).tolist()
+                                for m in images}}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
+    for amb in result.ambiguous:
+        side, other = ("left", "right") if isinstance(amb["left"], int) else ("right", "left")
+        print(f"ambiguous: {side} detection {amb[side]} has {len(amb[other])} {other} candidates "
+              f"{amb[other]} on its epipolar line ({' / '.join(amb['cameras'])}); left out")
+    for g in result.through_glass:
+        print(f"seen through glass by {', '.join(g['seen_through_glass_by'])}: marker at "
+              f"{np.round(np.array(g['point_m']) * 1e3, 2).tolist()} mm; left out")
+    print(f"{len(result.points_m)} markers (detections: "
+          f"{', '.join(f'{m.name} {len(m.circles)}' for m in images)}; reprojection error at most "
+          f"{result.error_px.max():.3f} px) -> {args.out}")
+    return 0
+
+
+def _run_step(argv: list[str]) -> int:
+    """Run ``abs reassemble <argv>`` with the step's own parser, defaults and checks: the
+    pipeline is the steps, not a copy of them."""
+    parser = argparse.ArgumentParser(prog="abs")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(["reassemble", *argv])
+    return args.run(args)
+
+
+def _run_pipeline(args) -> int:
+    work = args.work or args.out.parent / "reassembly"
+    ct = work / "ct"
+    measured = work / "markers_world.json"
+    mesh = [str(args.volume), "--out", str(ct), "--rounds", str(args.rounds)]
+    if args.voxel_size is not None:
+        mesh += ["--voxel-size", str(args.voxel_size)]
+    stereo = [str(args.left), str(args.right), "--cameras", str(args.cameras),
+              "--left-camera", args.left_camera, "--right-camera", args.right_camera,
+              "--tol-px", str(args.tol_px), "--merge-mm", str(args.merge_mm),
+              "--outlier-mm", str(args.outlier_mm)]
+    if args.radius_px:
+        stereo += ["--radius-px", *map(str, args.radius_px)]
+    place = [str(ct), "--measured", str(measured), "--scene", str(args.scene), "--object",
+             args.object, "--out", str(args.out)] + (["--material", args.material] if args.material else [])
+    print("== mesh")
+    _run_step(["mesh", *mesh])
+    print("== markers")
+    _run_step(["markers", *stereo, "--out", str(measured)])
+    # Markers a camera sees through the glass are displaced by refraction, and only the placed
+    # glass tells which they are: a first placement (unpaired markers allowed, as those may be
+    # among them), the markers found again with that glass, the final placement without them.
+    print("== place (first guess)")
+    _run_step(["place", *place, "--allow-unpaired"])
+    print("== markers, leaving out those seen through the placed glass")
+    checked = work / "markers_world_checked.json"
+    _run_step(["markers", *stereo, "--glass-scene", str(args.out), "--glass-object", args.object,
+               "--out", str(checked)])
+    print("== place")
+    place[place.index("--measured") + 1] = str(checked)
+    _run_step(["place", *place])
+    if args.soft:
+        print("== deform")
+        _run_step(["deform", "--scene", str(args.out), "--hard", args.object, "--soft", args.soft,
+                   "--max-edge", str(args.max_edge), "--out", str(args.out)])
+    print(f"placed {args.object} -> {args.out} (intermediate files in {work})")
     return 0

@@ -4,7 +4,11 @@
 Volume files (:mod:`.volume`), a synthetic CT phantom with known truth (:mod:`.phantom`),
 thresholds and iso-surfaces (:mod:`.surfaces`), RANSAC sphere fits of the markers
 (:mod:`.spheres`), mesh cleaning: carving, hole filling, decimation, √3 subdivision
-(:mod:`.cleaning`), the whole meshing step (:mod:`.meshing`), marker pairing and Kabsch
+(:mod:`.cleaning`), the whole meshing step (:mod:`.meshing`), markers in calibrated stereo
+photographs: circle detection (:mod:`.circles`), Sampson matching (:mod:`.epipolar`),
+triangulation and clustering (:mod:`.triangulation`), the seen-through-glass check
+(:mod:`.through_glass`) and the whole stereo step (:mod:`.stereo_markers`), synthetic marker
+photographs for tests (:mod:`.marker_images`), marker pairing and Kabsch
 placement (:mod:`.placement`), the placed object written into a scene file (:mod:`.scene_pose`)
 and the soft deformation of a tablecloth under a hard object (:mod:`.deform`).
 
