@@ -174,6 +174,11 @@ def lm_stages(settings) -> list[tuple[int, int]]:
     return [(factor, end) for (_, factor), end in zip(stages, ends)]
 
 
+#: Levenberg-Marquardt's largest step per coordinate, in typical steps (see the transforms of
+#: :class:`~abs.model.parameters.ParameterVector`).
+MAX_STEP = 2.0
+
+
 def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
                         state: OptimizerState, max_iterations: int, rtol: float = 1e-4,
                         atol: float = 1e-6, on_iteration: Callback | None = None) -> OptimizerState:
@@ -195,7 +200,7 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
     ``g = (J_A^T r_B + J_B^T r_A) / 2`` and the cross curvature ``H`` of the two Jacobians
     (:func:`cross_curvature`, the Gauss-Newton curvature without the Jacobians' noise);
     steps ``(H + lambda S) d = -g`` (``S``: each column's own squared size,
-    :func:`column_scale`); a trial is accepted when ``f`` falls by at least a
+    :func:`column_scale`), at most ``MAX_STEP`` typical steps per coordinate; a trial is accepted when ``f`` falls by at least a
     thousandth of the predicted fall, and ``lambda`` follows Nielsen's rule.
 
     Parameters
@@ -230,6 +235,11 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
     damping, growth, converged = 1e-3, 2.0, False
     while state.iteration < max_iterations:
         step = np.linalg.solve(H + damping * np.diag(scale), -g)
+        # At most MAX_STEP typical steps per coordinate (the direction kept): far from the
+        # solution the quadratic model can ask for a leap that the objective accepts, into a
+        # region a bounded transform flattens (glass absorption thrown to 0 through softplus,
+        # whose gradient then vanishes: the bowl of the glass suite stayed at 0, 0, 43 per metre).
+        step *= min(1.0, MAX_STEP / max(float(np.abs(step).max()), 1e-300))
         if np.all(np.abs(step) <= atol + rtol * np.abs(z)):
             converged = True
             break
