@@ -58,3 +58,16 @@ def test_without_holdout_views_the_training_residual_is_judged():
     summary = _summary(holdout_rmse={"before": None, "after": None},
                        train_rmse={"before": 0.3, "after": 0.2})
     assert any(c.startswith("The training RMSE") for c in run_checks(summary, BOUNDS, KINDS))
+
+
+def test_a_value_the_photographs_barely_determine_is_said_not_measured():
+    """The bowl of the glass suite: absorption 0.44 +- 1.7, 5.2 +- 4.2, 1.2 +- 1.7 per metre
+    (truth 6, 2.5, 1); a clear glass at 0 +- 0.09 and a well-measured 6.1 +- 0.3 are not flagged."""
+    steps = {"glass.absorption": [1.0, 1.0, 1.0], "glass.ior": [0.03], "environment.scale": [1.0]}
+    summary = _summary()
+    summary["parameters"]["glass.absorption"] = {"value": [0.44, 5.16, 1.19], "stderr": [1.7, 4.2, 1.7]}
+    flagged = [c for c in run_checks(summary, BOUNDS, KINDS, steps) if "is not measured" in c]
+    assert [c.split(" ")[0] for c in flagged] == [f"glass.absorption[{i}]" for i in range(3)]
+    summary["parameters"]["glass.absorption"] = {"value": [0.0, 0.0, 6.1], "stderr": [0.09, 0.09, 0.3]}
+    assert not any("is not measured" in c for c in run_checks(summary, BOUNDS, KINDS, steps))
+    assert run_checks(_summary(), BOUNDS, KINDS, steps) == []

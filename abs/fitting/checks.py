@@ -2,7 +2,7 @@
 
 A least-squares fit always returns numbers. These checks read the fit's own summary for the signs
 that those numbers are not a solution: a direction the photographs do not constrain (the Laplace
-curvature is singular there), a parameter pinned at a bound or outside the range its material can
+curvature is singular there) or constrain so loosely that the value is not measured, a parameter pinned at a bound or outside the range its material can
 physically have (a glass IOR of 2.18 is no glass; a fit there found a wrong basin), two parameters
 that trade off almost perfectly, and a holdout residual that stays far above the photographs'
 noise (the model leaves out physics, or the fit stopped in a wrong minimum). They are written to
@@ -12,7 +12,7 @@ noise (the model leaves out physics, or the fit stopped in a wrong minimum). The
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -46,7 +46,8 @@ def _at_bound(value: float, lower: float, upper: float) -> str | None:
 
 
 def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
-               kinds: Mapping[str, tuple[str, str]] | None = None) -> list[str]:
+               kinds: Mapping[str, tuple[str, str]] | None = None,
+               steps: Mapping[str, Sequence[float]] | None = None) -> list[str]:
     """Warnings about a finished fit, each a short message a user can act on.
 
     Parameters
@@ -58,6 +59,10 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
         Parameter name to its physical ``(lower, upper)`` bounds.
     kinds : mapping, optional
         Parameter name to ``(material type, field)`` for the plausibility ranges.
+    steps : mapping, optional
+        Parameter name to the typical change of each component (its units): an error larger
+        than both this and half the value (from a finite lower bound) says the value is not
+        measured.
 
     Returns
     -------
@@ -78,6 +83,17 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
                 "determined by the data. Fit fewer parameters (tie per-channel values), add views "
                 "that show the effect, or give a prior.")
         lower, upper = bounds.get(name, (-np.inf, np.inf))
+        if steps is not None and name in steps:
+            step = np.broadcast_to(np.asarray(steps[name], float), values.shape)
+            origin = lower if np.isfinite(lower) else 0.0
+            for i, (v, s) in enumerate(zip(values, stderr)):
+                if s is not None and s > max(0.5 * abs(v - origin), step[i]):
+                    checks.append(
+                        f"{name}[{i}] = {v:.4g} +- {s:.2g}: the photographs determine it only to "
+                        f"more than half its value and more than a typical change ({step[i]:.2g}), "
+                        "so it is not measured. Raise --spp and --refinement-steps (the renders' "
+                        "noise may dominate), add views that show it, tie channels or give a "
+                        "prior.")
         for i, v in enumerate(values):
             hit = _at_bound(float(v), lower, upper)
             if hit:

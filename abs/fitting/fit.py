@@ -61,7 +61,7 @@ class FitResult:
     checks: list[str] = field(default_factory=list)
 
     def summary(self) -> dict:
-        """``fit.json`` (public contract, see docs/fit-output.md)."""
+        """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
         stderr = self.vector.split(self.uncertainty.stderr)
         parameters = {}
         for name, unit in zip(self.vector.names, self.vector.units):
@@ -204,5 +204,5 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)
-                                                  for n in names}, kinds)
+                                                  for n in names}, kinds, vector.split(vector.step))
     return result

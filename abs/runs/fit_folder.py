@@ -2,7 +2,7 @@
 
 A fit folder holds::
 
-    fit.json          the summary (docs/fit-output.md)
+    fit.json          the summary (docs/fitting.md, "Outputs")
     scene.toml        the fitted scene file (same format, fitted parameters replaced)
     checkpoint.json   the optimiser state after the last completed iteration (for --resume)
     renders/          EXR renderings of every view with the fitted parameters
