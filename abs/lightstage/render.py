@@ -55,8 +55,19 @@ class AnalyticMaterial:
 
 
 def fitted_reflectance(fits: ModelFits, model: str, points: SurfacePoints) -> Reflectance:
-    """The per-point fitted ``model`` as a :data:`Reflectance`; unfitted points render black."""
+    """The per-point fitted ``model`` as a :data:`Reflectance`.
+
+    A point with too few fitting measurements to be fitted (seen rarely, or only in held-out
+    frames) takes the parameters of the nearest fitted point, as a renderer of the fitted object
+    would have to; the object renders black only when no point is fitted at all.
+    """
+    from scipy.spatial import cKDTree
+
     params = np.nan_to_num(fits.params[model], nan=0.0)
+    fitted = np.nonzero(fits.count > 0)[0]
+    if 0 < len(fitted) < len(params):
+        _, nearest = cKDTree(points.position[fitted]).query(points.position)
+        params = params[fitted[nearest]]
 
     def reflectance(view: PoseView, wi: np.ndarray) -> np.ndarray:
         pid = points.lookup(view.hits.triangle, view.hits.barycentric)
