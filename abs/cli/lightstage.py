@@ -51,6 +51,9 @@ def add_parser(sub) -> None:
     f.add_argument("folder", type=Path, help="light-stage folder (from measure)")
     f.add_argument("--min-measurements", type=int, default=8,
                    help="points with fewer measurements are not fitted (default %(default)s)")
+    f.add_argument("--max-measurements", type=int, default=400,
+                   help="fit each point to at most this many of its measurements, drawn at random "
+                        "(default %(default)s)")
     f.set_defaults(run=run_fit)
 
     r = commands.add_parser("render", help="render held-out views and lights; MAE (thesis Eq. 4.1)")
@@ -128,7 +131,7 @@ def run_fit(args) -> int:
 
     meta = _meta(args.folder)
     meas = Measurements.load(_need(args.folder / "measurements.npz", "measure"))
-    fits = fit_measurements(meas, int(meta["points"]), args.min_measurements,
+    fits = fit_measurements(meas, int(meta["points"]), args.min_measurements, args.max_measurements,
                             progress=lambda k, n: print(f"fitted {k}/{n} points", flush=True))
     fits.save(args.folder / "fits.npz")
     summary = {"converged_fraction": fits.converged_fraction(),

@@ -113,7 +113,7 @@ def fit_channel(cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray,
     for e in _EXPONENT_GRID:
         spec = (e + 8.0) / (8.0 * np.pi) * np.clip(cos_h, 0.0, 1.0) ** e * np.clip(cos_l, 0.0, None)
         kd, ks = _linear_start([diffuse, spec], y)
-        sse = float(np.sum((kd * diffuse + ks * spec - y) ** 2))
+        sse = float(np.nan_to_num(np.sum((kd * diffuse + ks * spec - y) ** 2), nan=np.inf))
         if best is None or sse < best[0]:
             best = (sse, np.array([kd, ks, e]))
     out["blinn_phong"] = _refine("blinn_phong", best[1], cos, y, f_scale, log_shape=True)
@@ -142,7 +142,7 @@ class ModelFits:
     rms : dict of str to np.ndarray
         Per model, (P, 3) RMS residual of ``f_r cos_l`` (1/sr).
     count : np.ndarray
-        (P,) measurements used per point.
+        (P,) measurements available per point (0: not fitted).
     """
 
     params: dict[str, np.ndarray]
@@ -175,7 +175,7 @@ class ModelFits:
 
 def fit_points(point: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray,
                value: np.ndarray, n_points: int, min_measurements: int = 8,
-               progress=None) -> ModelFits:
+               max_measurements: int | None = 400, progress=None) -> ModelFits:
     """Fit every model to every surface point and channel.
 
     Parameters
@@ -190,6 +190,10 @@ def fit_points(point: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: n
         Number of surface points ``P``.
     min_measurements : int
         Points with fewer measurements are left unfitted (NaN, not converged, count 0).
+    max_measurements : int or None
+        A point with more measurements is fitted to this many of them, drawn at random (fixed
+        seed): the cost of a fit grows with them, and a few hundred already pin three parameters.
+        ``None`` uses all.
     progress : callable, optional
         Called with ``(done, total)`` now and then.
     """
@@ -200,9 +204,12 @@ def fit_points(point: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: n
     order = np.argsort(point, kind="stable")
     starts = np.searchsorted(point[order], np.arange(n_points + 1))
     todo = [p for p in range(n_points) if starts[p + 1] - starts[p] >= min_measurements]
+    rng = np.random.default_rng(0)
     for k, p in enumerate(todo):
         idx = order[starts[p]:starts[p + 1]]
         count[p] = len(idx)
+        if max_measurements is not None and len(idx) > max_measurements:
+            idx = np.sort(rng.choice(idx, max_measurements, replace=False))
         for c in range(3):
             fits = fit_channel(cos_l[idx], cos_v[idx], cos_h[idx], value[idx, c])
             for m, f in fits.items():

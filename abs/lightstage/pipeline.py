@@ -57,13 +57,13 @@ def prepare(mesh, spacing_m: float, max_depth: int = 6) -> tuple[MeshTracer, Sur
 
 
 def fit_measurements(meas: Measurements, n_points: int, min_measurements: int = 8,
-                     progress=None) -> ModelFits:
+                     max_measurements: int | None = 400, progress=None) -> ModelFits:
     """Normalise the fitting (not held-out) measurements and fit every model per point."""
     train = meas.select(~meas.held_out)
     iso = normalise(train.normal.astype(np.float64), train.light.astype(np.float64),
                     train.view.astype(np.float64))
     return fit_points(train.point, iso.cos_l, iso.cos_v, iso.cos_h, train.value.astype(np.float64),
-                      n_points, min_measurements, progress)
+                      n_points, min_measurements, max_measurements, progress)
 
 
 def evaluate_held_out(geometry: RigGeometry, tracer: MeshTracer, frames: Iterable[HeldOutFrame],
