@@ -175,7 +175,10 @@ def _tiny_session(tmp_path):
 def test_cli_measure_fit_render_on_a_simulated_session(tmp_path, capsys):
     session = _tiny_session(tmp_path)
     assert (session / "geometry.json").exists() and (session / "mesh.ply").exists()
-    assert main(["lightstage", "measure", str(session)]) == 0
+    # A coarser mesh than the session's (320 triangles, one surface point each) keeps the fit short.
+    mesh = tmp_path / "coarse.ply"
+    trimesh.creation.icosphere(2, 0.05).export(mesh)
+    assert main(["lightstage", "measure", str(session), "--mesh", str(mesh), "--spacing", "0.02"]) == 0
     out = session / "lightstage"
     assert main(["lightstage", "fit", str(out), "--min-measurements", "6"]) == 0
     assert main(["lightstage", "render", str(out), "--write", "1"]) == 0
@@ -195,7 +198,7 @@ def test_cli_measure_fit_render_on_a_simulated_session(tmp_path, capsys):
     from rig.sim.optics import albedo_at
 
     fits = ModelFits.load(out / "fits.npz")
-    _, points = prepare(load_mesh(session / "mesh.ply"), 0.01)
+    _, points = prepare(load_mesh(mesh), 0.02)
     sel = fits.count > 0
     err = np.abs(fits.params["lambert"][sel, :, 0] - albedo_at(points.position[sel]))
     assert np.median(err) < 0.01

@@ -6,6 +6,9 @@ fit is :func:`scipy.optimize.least_squares` (trust-region reflective, so the bou
 throughout) with the ``soft_l1`` loss, so that shadow-boundary pixels, wrong normals and
 saturated highlights do not dominate, and each model starts where it is easy:
 
+Each point's three channels have their own parameters but are solved in one call per model (their
+Jacobian is block-diagonal; scipy's per-call overhead dominates problems this small).
+
 - Lambert: the closed-form least-squares albedo.
 - Blinn-Phong: both albedos are linear given the exponent, so a short grid of exponents, each with
   a non-negative least-squares solve for ``(kd, ks)``, gives the start; the exponent is refined on
@@ -28,7 +31,7 @@ from scipy.optimize import least_squares, nnls
 
 from abs.lightstage.models import MODELS, PARAMETERS, blinn_phong_to_alpha
 
-__all__ = ["BOUNDS", "PointFit", "fit_channel", "fit_points", "ModelFits"]
+__all__ = ["BOUNDS", "PointFit", "fit_point", "fit_channel", "fit_points", "ModelFits"]
 
 BOUNDS = {
     "lambert": (np.array([0.0]), np.array([10.0])),
@@ -55,78 +58,113 @@ def _linear_start(basis: list[np.ndarray], y: np.ndarray) -> np.ndarray:
 
 
 def _refine(model: str, x0: np.ndarray, cos: tuple[np.ndarray, ...], y: np.ndarray,
-            f_scale: float, log_shape: bool) -> PointFit:
-    """Robust bounded least squares from ``x0``; the third parameter on a log scale if asked."""
+            f_scale: np.ndarray, log_shape: bool) -> list[PointFit]:
+    """Robust bounded least squares from ``x0`` (C, k) for C channels at once.
+
+    The channels' parameters are independent (their Jacobian is block-diagonal), so one solve of
+    all of them gives each channel's own fit; it is one call instead of C, and scipy's per-call
+    overhead dominates these small problems. Each channel's residuals are divided by its own
+    robust scale, so ``soft_l1`` treats every channel as a fit of its own would. The shape
+    parameter (third) is solved on a log scale if asked.
+    """
     fn = MODELS[model]
     lo, hi = BOUNDS[model]
+    n_ch, k = x0.shape
     x0 = np.clip(x0, lo, hi)
-
-    def to_params(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([x[:2], np.exp(x[2:])]) if log_shape else x
-
     if log_shape:
         lo_x, hi_x = np.concatenate([lo[:2], np.log(lo[2:])]), np.concatenate([hi[:2], np.log(hi[2:])])
-        start = np.concatenate([x0[:2], np.log(x0[2:])])
+        start = np.concatenate([x0[:, :2], np.log(x0[:, 2:])], axis=1)
     else:
         lo_x, hi_x, start = lo, hi, x0
+
+    def to_params(x: np.ndarray) -> np.ndarray:
+        x = x.reshape(n_ch, k)
+        return np.concatenate([x[:, :2], np.exp(x[:, 2:])], axis=1) if log_shape else x
+
+    target = (y / f_scale).T  # (C, M)
+    scale = 1.0 / f_scale[:, None]
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        # Parameters (k, C, 1) broadcast over the cosines: every channel in one evaluation.
+        p = to_params(x).T[:, :, None]
+        return (fn(p, *cos) * scale - target).ravel()
+
     # Keep the start strictly inside the box: trf needs an interior point.
     span = hi_x - lo_x
     start = np.clip(start, lo_x + 1e-9 * span, hi_x - 1e-9 * span)
+    lower, upper = np.tile(lo_x, n_ch), np.tile(hi_x, n_ch)
+    failed = [PointFit(np.full(k, np.nan), False, float("nan")) for _ in range(n_ch)]
     try:
-        res = least_squares(lambda x: fn(to_params(x), *cos) - y, start, bounds=(lo_x, hi_x),
-                            loss="soft_l1", f_scale=f_scale, method="trf", max_nfev=200,
-                            x_scale="jac")
+        res = least_squares(residuals, start.ravel(), bounds=(lower, upper), loss="soft_l1",
+                            f_scale=1.0, method="trf", max_nfev=200, x_scale="jac")
     except (ValueError, np.linalg.LinAlgError):
-        return PointFit(np.full(len(lo), np.nan), False, float("nan"))
+        return failed
     p = to_params(res.x)
-    resid = fn(p, *cos) - y
-    rms = float(np.sqrt(np.mean(resid ** 2)))
-    ok = bool(res.status > 0 and np.all(np.isfinite(p)) and np.isfinite(rms)
-              and rms < np.sqrt(np.mean(y ** 2)))
-    return PointFit(p, ok, rms)
+    out = []
+    for c in range(n_ch):
+        resid = fn(p[c], *cos) - y[:, c]
+        rms = float(np.sqrt(np.mean(resid ** 2)))
+        ok = bool(res.status > 0 and np.all(np.isfinite(p[c])) and np.isfinite(rms)
+                  and rms < np.sqrt(np.mean(y[:, c] ** 2)))
+        out.append(PointFit(p[c], ok, rms))
+    return out
 
 
-def fit_channel(cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray,
-                y: np.ndarray) -> dict[str, PointFit]:
-    """Fit the three models to one point's measurements of one channel.
+def fit_point(cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray,
+              y: np.ndarray) -> dict[str, list[PointFit]]:
+    """Fit the three models to one point's measurements, every channel with its own parameters.
 
     Parameters
     ----------
     cos_l, cos_v, cos_h : np.ndarray
         (M,) cosines of the isotropic angles (:class:`~abs.lightstage.normalise.Isotropic`).
     y : np.ndarray
-        (M,) measured ``f_r cos_l`` (1/sr).
+        (M, C) measured ``f_r cos_l`` (1/sr) per channel.
 
     Returns
     -------
     dict
-        ``{"lambert": PointFit, "blinn_phong": ..., "cook_torrance": ...}``.
+        ``{"lambert": [PointFit per channel], "blinn_phong": ..., "cook_torrance": ...}``.
     """
     cos = (cos_l, cos_v, cos_h)
-    # The robust loss's inlier scale: a tenth of the typical signal, floored for black points.
-    f_scale = max(0.1 * float(np.percentile(np.abs(y), 90)), 1e-4)
+    y = y.reshape(len(cos_l), -1)
+    n_ch = y.shape[1]
+    # The robust loss's inlier scale per channel: a tenth of the typical signal, floored for
+    # black points.
+    f_scale = np.maximum(0.1 * np.percentile(np.abs(y), 90, axis=0), 1e-4)
     diffuse = np.clip(cos_l, 0.0, None) / np.pi
-    kd0 = float(np.sum(diffuse * y) / max(np.sum(diffuse * diffuse), 1e-30))
-    out = {"lambert": _refine("lambert", np.array([kd0]), cos, y, f_scale, log_shape=False)}
+    kd0 = (diffuse @ y) / max(float(diffuse @ diffuse), 1e-30)
+    out = {"lambert": _refine("lambert", kd0[:, None], cos, y, f_scale, log_shape=False)}
 
-    best = None
-    for e in _EXPONENT_GRID:
-        spec = (e + 8.0) / (8.0 * np.pi) * np.clip(cos_h, 0.0, 1.0) ** e * np.clip(cos_l, 0.0, None)
-        kd, ks = _linear_start([diffuse, spec], y)
-        sse = float(np.nan_to_num(np.sum((kd * diffuse + ks * spec - y) ** 2), nan=np.inf))
-        if best is None or sse < best[0]:
-            best = (sse, np.array([kd, ks, e]))
-    out["blinn_phong"] = _refine("blinn_phong", best[1], cos, y, f_scale, log_shape=True)
+    bp_start = np.zeros((n_ch, 3))
+    for c in range(n_ch):
+        best = None
+        for e in _EXPONENT_GRID:
+            spec = (e + 8.0) / (8.0 * np.pi) * np.clip(cos_h, 0.0, 1.0) ** e * np.clip(cos_l, 0.0, None)
+            kd, ks = _linear_start([diffuse, spec], y[:, c])
+            sse = float(np.nan_to_num(np.sum((kd * diffuse + ks * spec - y[:, c]) ** 2), nan=np.inf))
+            if best is None or sse < best[0]:
+                best = (sse, np.array([kd, ks, e]))
+        bp_start[c] = best[1]
+    out["blinn_phong"] = _refine("blinn_phong", bp_start, cos, y, f_scale, log_shape=True)
 
-    bp = out["blinn_phong"].params
-    exponent = bp[2] if np.isfinite(bp[2]) else best[1][2]
-    # Inside the roughness bounds with a margin, so the optimiser can move either way.
-    alpha0 = float(np.clip(blinn_phong_to_alpha(exponent), 0.02, 0.95))
-    spec_ct = MODELS["cook_torrance"](np.array([0.0, 1.0, alpha0]), *cos)
-    kd, ks = _linear_start([diffuse, spec_ct], y)
-    out["cook_torrance"] = _refine("cook_torrance", np.array([kd, ks, alpha0]), cos, y, f_scale,
-                                   log_shape=True)
+    ct_start = np.zeros((n_ch, 3))
+    for c in range(n_ch):
+        bp = out["blinn_phong"][c].params
+        exponent = bp[2] if np.isfinite(bp[2]) else bp_start[c, 2]
+        # Inside the roughness bounds with a margin, so the optimiser can move either way.
+        alpha0 = float(np.clip(blinn_phong_to_alpha(exponent), 0.02, 0.95))
+        spec_ct = MODELS["cook_torrance"](np.array([0.0, 1.0, alpha0]), *cos)
+        kd, ks = _linear_start([diffuse, spec_ct], y[:, c])
+        ct_start[c] = (kd, ks, alpha0)
+    out["cook_torrance"] = _refine("cook_torrance", ct_start, cos, y, f_scale, log_shape=True)
     return out
+
+
+def fit_channel(cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray,
+                y: np.ndarray) -> dict[str, PointFit]:
+    """:func:`fit_point` for one channel's (M,) measurements: ``{model: PointFit}``."""
+    return {m: fits[0] for m, fits in fit_point(cos_l, cos_v, cos_h, y[:, None]).items()}
 
 
 @dataclass(frozen=True)
@@ -210,9 +248,8 @@ def fit_points(point: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: n
         count[p] = len(idx)
         if max_measurements is not None and len(idx) > max_measurements:
             idx = np.sort(rng.choice(idx, max_measurements, replace=False))
-        for c in range(3):
-            fits = fit_channel(cos_l[idx], cos_v[idx], cos_h[idx], value[idx, c])
-            for m, f in fits.items():
+        for m, per_channel in fit_point(cos_l[idx], cos_v[idx], cos_h[idx], value[idx]).items():
+            for c, f in enumerate(per_channel):
                 params[m][p, c] = f.params
                 conv[m][p, c] = f.converged
                 rms[m][p, c] = f.rms

@@ -1,6 +1,8 @@
 """Reflectance models of the thesis, as predictions of ``f_r cos(theta_l)`` (1/sr).
 
-Every model is isotropic and takes the cosines of :class:`~abs.lightstage.normalise.Isotropic`:
+Parameters broadcast against the cosines: ``p`` of shape (k, C, 1) with cosines of shape (M,)
+gives (C, M), every channel at once (the fits use this). Every model is isotropic and takes the
+cosines of :class:`~abs.lightstage.normalise.Isotropic`:
 ``cos_l = n.l``, ``cos_v = n.v``, ``cos_h = n.h``. Parameters are per colour channel:
 
 - Lambert ``(kd,)``: ``kd / pi``; ``kd`` the diffuse albedo.
@@ -24,18 +26,18 @@ __all__ = ["MODELS", "lambert", "blinn_phong", "cook_torrance", "blinn_phong_to_
 
 def lambert(p: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray) -> np.ndarray:
     """``f_r cos_l`` of Lambert with ``p = (kd,)``."""
-    return p[0] / np.pi * np.clip(cos_l, 0.0, None)
+    return p[0] / np.pi * np.maximum(cos_l, 0.0)
 
 
 def blinn_phong(p: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np.ndarray) -> np.ndarray:
     """``f_r cos_l`` of normalised Blinn-Phong with ``p = (kd, ks, e)``."""
     kd, ks, e = p[0], p[1], p[2]
-    spec = ks * (e + 8.0) / (8.0 * np.pi) * np.clip(cos_h, 0.0, 1.0) ** e
-    return (kd / np.pi + spec) * np.clip(cos_l, 0.0, None)
+    spec = ks * (e + 8.0) / (8.0 * np.pi) * np.minimum(np.maximum(cos_h, 0.0), 1.0) ** e
+    return (kd / np.pi + spec) * np.maximum(cos_l, 0.0)
 
 
 def _ggx_g1(c: np.ndarray, a2: float) -> np.ndarray:
-    c = np.clip(c, 1e-6, 1.0)
+    c = np.minimum(np.maximum(c, 1e-6), 1.0)
     return 2.0 * c / (c + np.sqrt(a2 + (1.0 - a2) * c * c))
 
 
@@ -43,10 +45,10 @@ def cook_torrance(p: np.ndarray, cos_l: np.ndarray, cos_v: np.ndarray, cos_h: np
     """``f_r cos_l`` of Cook-Torrance (GGX, Smith) with ``p = (kd, ks, alpha)``."""
     kd, ks, alpha = p[0], p[1], p[2]
     a2 = alpha * alpha
-    ch = np.clip(cos_h, 0.0, 1.0)
+    ch = np.minimum(np.maximum(cos_h, 0.0), 1.0)
     d = a2 / (np.pi * (ch * ch * (a2 - 1.0) + 1.0) ** 2)
-    cl = np.clip(cos_l, 0.0, None)
-    cv = np.clip(cos_v, 1e-6, None)
+    cl = np.maximum(cos_l, 0.0)
+    cv = np.maximum(cos_v, 1e-6)
     g = _ggx_g1(cl, a2) * _ggx_g1(cv, a2)
     # f_r cos_l = ... D G / (4 cos_l cos_v) * cos_l: the cos_l cancels, kept finite at grazing light.
     return kd / np.pi * cl + ks * d * g / (4.0 * cv) * (cl > 0)
