@@ -103,24 +103,14 @@ def simulate(geometry, truth_tracer: MeshTracer, mat: AnalyticMaterial, position
         for light in sorted(geometry.leds):
             frames = []
             for t in EXPOSURES:
-                clean = render_view(geometry, truth_tracer, view, light, 255, t, _unclipped(mat))
+                clean = render_view(geometry, truth_tracer, view, light, 255, t, mat)  # clipped at 1
+                # Noise on the clipped value, clipped again: a sensor at full well stays there.
                 noisy = clean + rng.normal(size=clean.shape) * (0.003 + 0.01 * clean)
                 frames.append(np.clip(noisy, 0.0, 1.0))
             groups.append(LightGroup(pos, angle, light, 255, (), EXPOSURES))
             merged.append(merge_bracket(frames, EXPOSURES))
             raw.append(frames)
     return groups, merged, raw
-
-
-class _unclipped:
-    """render_view clips at 1 before the noise; the noise is added to the clipped value then
-    clipped again, which is what a sensor at full well does."""
-
-    def __init__(self, mat):
-        self.mat = mat
-
-    def __call__(self, view, wi):
-        return self.mat(view, wi)
 
 
 def run_object(name: str, args, geometry) -> dict:

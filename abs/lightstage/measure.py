@@ -31,7 +31,8 @@ from abs.lightstage.raycast import Hits, MeshTracer
 from abs.lightstage.session import LightGroup
 from abs.lightstage.surface import SurfacePoints
 
-__all__ = ["Measurements", "PoseView", "pose_view", "led_irradiance", "is_held_out", "measure"]
+__all__ = ["Measurements", "PoseView", "pose_view", "led_irradiance", "is_held_out", "measure",
+           "groups_json"]
 
 MIN_COS = 0.05
 """Measurements with ``n.l`` or ``n.v`` below this are dropped (grazing: the normal's error

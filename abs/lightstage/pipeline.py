@@ -21,13 +21,14 @@ from abs.errors import InputError
 from abs.lightstage.fit import ModelFits, fit_points
 from abs.lightstage.geometry import RigGeometry
 from abs.lightstage.measure import Measurements, pose_view
-from abs.lightstage.models import MODELS
+from abs.lightstage.models import MODELS, PARAMETERS
 from abs.lightstage.normalise import normalise
 from abs.lightstage.raycast import MeshTracer
 from abs.lightstage.render import Reflectance, mae, render_view
 from abs.lightstage.surface import SurfacePoints, build_surface_points
 
-__all__ = ["load_mesh", "prepare", "fit_measurements", "evaluate_held_out", "HeldOutFrame"]
+__all__ = ["load_mesh", "prepare", "fit_measurements", "evaluate_held_out", "HeldOutFrame",
+           "parameter_summary"]
 
 HeldOutFrame = tuple[int, float, str, int, float, np.ndarray]
 """``(camera, angle_deg, light, level, exposure_s, observed image)`` of one held-out frame."""
@@ -98,8 +99,6 @@ def evaluate_held_out(geometry: RigGeometry, tracer: MeshTracer, frames: Iterabl
 
 def parameter_summary(fits: ModelFits) -> dict:
     """Median (over fitted points) of each model's parameters per channel, for ``fit.json``."""
-    from abs.lightstage.models import PARAMETERS
-
     out = {}
     fitted = fits.count > 0
     for m in MODELS:

@@ -63,6 +63,7 @@ def fitted_reflectance(fits: ModelFits, model: str, points: SurfacePoints) -> Re
     """
     from scipy.spatial import cKDTree
 
+    assert model in MODELS, model
     params = np.nan_to_num(fits.params[model], nan=0.0)
     fitted = np.nonzero(fits.count > 0)[0]
     if 0 < len(fitted) < len(params):
@@ -74,7 +75,6 @@ def fitted_reflectance(fits: ModelFits, model: str, points: SurfacePoints) -> Re
         iso = normalise(view.hits.normal, wi, view.view)
         return evaluate(model, params[pid], iso.cos_l, iso.cos_v, iso.cos_h)
 
-    assert model in MODELS, model
     return reflectance
 
 
