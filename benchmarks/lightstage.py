@@ -25,6 +25,8 @@ over the object mask of every held-out frame (each exposure), pixel values in [0
 
     PYTHONPATH=. python benchmarks/lightstage.py [--positions 12] [--size 64x48] [--spacing 0.01]
 
+benchmarks/results/lightstage.json is from ``--positions 40`` (the thesis size).
+
 Writes benchmarks/results/lightstage.json.
 """
 
