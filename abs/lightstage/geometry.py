@@ -19,7 +19,8 @@ Format ``"abs-lightstage-geometry/1"`` (JSON), world frame of docs/conventions.m
 - leds: position (metres), unit axis the LED points along, on-axis radiant intensity at full
   level per RGB channel (W/sr; any common unit works, it divides out of the reflectance only if
   it is right). An LED at level ``L`` of 255 emits ``L / 255`` of it.
-- attenuation: :class:`~abs.lightstage.attenuation.Attenuation`, shared by every LED.
+- attenuation: :class:`~abs.lightstage.attenuation.Attenuation`, shared by every LED (``cos_power``
+  with an ``exponent``, or ``table`` with ``angles_deg`` and ``values``); absent: none (1 everywhere).
 - gain: pixel value per unit radiance per second of exposure, so a pixel is
   ``gain * exposure_s * radiance`` (linear, before clipping at 1).
 """

@@ -85,7 +85,8 @@ def read_session_groups(folder: str | Path) -> list[LightGroup]:
         The folder or its manifest is missing or malformed, a listed frame file is missing, or
         the session has no LED frames.
     """
-    folder = Path(folder)
+    # Absolute, so the paths recorded in a light-stage folder work from any directory.
+    folder = Path(folder).resolve()
     if not folder.is_dir():
         raise InputError(folder, "", "session folder not found")
     manifest_path = folder / "manifest.json"
