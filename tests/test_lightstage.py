@@ -229,3 +229,19 @@ def test_cli_errors_for_bad_input(tmp_path, capsys):
     assert "cameras[0].K" in capsys.readouterr().err
     assert main(["lightstage", "fit", str(tmp_path / "nothing")]) == 2
     assert "run 'abs lightstage measure' first" in capsys.readouterr().err
+
+
+def test_geometry_file_round_trip_and_tabulated_attenuation(tmp_path):
+    from abs.lightstage.geometry import read_geometry, write_geometry
+
+    geometry, _, _, _ = _plane_rig()
+    table = Attenuation(None, (0.0, 30.0, 60.0), (1.0, 0.5, 0.0))
+    geometry = RigGeometry(geometry.cameras, geometry.leds, geometry.turntable_axis,
+                           geometry.turntable_center, table, geometry.gain)
+    write_geometry(geometry, tmp_path / "g.json")
+    back = read_geometry(tmp_path / "g.json")
+    np.testing.assert_allclose(back.cameras[0].K, geometry.cameras[0].K)
+    np.testing.assert_allclose(back.leds["b00l00"].intensity, [1.0, 2.0, 0.5])
+    cos = np.cos(np.deg2rad([0.0, 15.0, 45.0, 70.0, 120.0]))
+    np.testing.assert_allclose(back.attenuation(cos), [1.0, 0.75, 0.25, 0.0, 0.0], atol=1e-12)
+    assert back.gain == 50.0
