@@ -138,6 +138,11 @@ def run_capture(args) -> int:
                            faults=_faults(args.sim_fault), renderer=args.sim_renderer,
                            link=args.sim_link)
         port, folder, model = sim.url, args.out / "incoming", SIMULATED_CAMERA[args.sim_renderer]
+        if args.sim_renderer == "sphere":
+            # The simulated rig knows its geometry exactly: write it for 'abs lightstage'.
+            from rig.sim.lightstage_files import write_lightstage_files
+
+            write_lightstage_files(sim.dome, width, height, args.out)
     else:
         if not args.port:
             raise InputError(None, "--port", "required (or --simulate)")

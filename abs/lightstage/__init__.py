@@ -1,0 +1,22 @@
+"""Light-stage reflectance measurement (issue 27, part 2): from a capture session to per-point
+reflectance models and held-out renders.
+
+One concept a module:
+
+- :mod:`~abs.lightstage.geometry`: the rig's geometry file (cameras, turntable axis, LEDs, their
+  radial attenuation, sensor gain), read and written as JSON;
+- :mod:`~abs.lightstage.raycast`: rays against the object's mesh with Mitsuba (first hits and
+  shadow rays);
+- :mod:`~abs.lightstage.surface`: uniformly spaced surface points by per-triangle subdivision,
+  with constant-time lookup from a ray hit;
+- :mod:`~abs.lightstage.session`: a rig session folder's LED frames, HDR brackets merged;
+- :mod:`~abs.lightstage.measure`: every pixel of every frame onto the mesh, as
+  ``(point, normal, light, view, value)`` measurements of ``f_r cos(theta_l)``;
+- :mod:`~abs.lightstage.normalise`: the isotropic angles of a measurement;
+- :mod:`~abs.lightstage.models`: Lambert, Blinn-Phong and Cook-Torrance (GGX);
+- :mod:`~abs.lightstage.fit`: per point and channel robust, bounded fits of the three models;
+- :mod:`~abs.lightstage.render`: frames from per-point models (held-out renders) and from an
+  analytic material (the benchmark's forward model), and the MAE of thesis Eq. 4.1.
+
+docs/lightstage.md describes the pipeline, its conventions and what is not done.
+"""
