@@ -122,6 +122,10 @@ class LevenbergMarquardt(Optimiser):
                     state, end, settings.rtol, settings.atol, on_iteration)
                 if end < settings.max_iterations:
                     state.solver = replace(state.solver, converged=None)  # a coarse stage
+            if state.solver is not None and state.solver.converged and on_iteration is not None:
+                # Once more, so that a checkpoint knows: a resumed fit must not run
+                # Levenberg-Marquardt again where it had converged (it would evaluate again).
+                on_iteration(state)
 
         def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
             base = settings.seed + 10_000 * iteration
@@ -196,12 +200,13 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
     so its minimiser has no such bias.
 
     ``f`` is not a sum of squares, so this is Levenberg-Marquardt written out (optimistix's
-    solvers, which abs used before, take residual functions only): the model ``f + g.d + d.H.d / 2`` with the exact gradient
-    ``g = (J_A^T r_B + J_B^T r_A) / 2`` and the cross curvature ``H`` of the two Jacobians
-    (:func:`cross_curvature`, the Gauss-Newton curvature without the Jacobians' noise);
-    steps ``(H + lambda S) d = -g`` (``S``: each column's own squared size,
-    :func:`column_scale`), at most ``MAX_STEP`` typical steps per coordinate; a trial is accepted when ``f`` falls by at least a
-    thousandth of the predicted fall, and ``lambda`` follows Nielsen's rule.
+    solvers, which abs used before, take residual functions only): the model
+    ``f + g.d + d.H.d / 2`` with the exact gradient ``g = (J_A^T r_B + J_B^T r_A) / 2`` and the
+    cross curvature ``H`` of the two Jacobians (:func:`cross_curvature`, the Gauss-Newton
+    curvature without the Jacobians' noise); steps ``(H + lambda S) d = -g`` (``S``: each
+    column's own squared size, :func:`column_scale`), at most ``MAX_STEP`` typical steps per
+    coordinate; a trial is accepted when ``f`` falls by at least a thousandth of the predicted
+    fall, and ``lambda`` follows Nielsen's rule.
 
     Parameters
     ----------
