@@ -21,6 +21,7 @@ rerun) and prints a table.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -100,7 +101,7 @@ def _truth(case: Case) -> dict:
 
 
 def run_case(case: Case, work: Path, args) -> dict:
-    from abs.fitting import FitSettings, fit
+    from abs.fitting import fit
     from abs.scene import load_scene
     from abs.simulate import simulate_capture
 
@@ -116,7 +117,7 @@ def run_case(case: Case, work: Path, args) -> dict:
                          width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
                          read_noise=0.003, seed=1, render=mitsuba_photograph)
         made.write_text(json.dumps({**shape, "truth": _truth(case)}))
-    settings = FitSettings(**_settings(args.settings))
+    settings = _settings(args.settings)
     start = time.perf_counter()
 
     def progress(state):
@@ -142,20 +143,21 @@ def run_case(case: Case, work: Path, args) -> dict:
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
             "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
                       for h in result.history],
-            "settings": {**shape, "fit": {k: list(v) if isinstance(v, tuple) else v
-                                          for k, v in _settings(args.settings).items()}}}
+            "settings": {**shape, "fit": dataclasses.asdict(settings)}}
 
 
-def _settings(text: str) -> dict:
-    """``--settings`` JSON, or the glass recipe's settings when it is empty."""
+def _settings(text: str):
+    """``--settings`` JSON as :class:`abs.FitSettings`, or the glass recipe's when it is empty."""
+    from abs.fitting import FitSettings
+
     given = json.loads(text)
     if given:
-        return {k: tuple(map(tuple, v)) if k.endswith("schedule") else
-                tuple(v) if isinstance(v, list) else v for k, v in given.items()}
+        return FitSettings(**{k: tuple(map(tuple, v)) if k.endswith("schedule") else
+                              tuple(v) if isinstance(v, list) else v for k, v in given.items()})
     sys.path.insert(0, str(ROOT / "fitting"))
-    from glass_absorption_ior import SETTINGS
+    from glass_absorption_ior import settings
 
-    return {**SETTINGS, "tie": ("glass.ior",)}
+    return settings("glass")
 
 
 def table(results: list[dict]) -> list[str]:
