@@ -74,10 +74,6 @@ class Objective:
         s = self.settings
         return self.model.problem("train", s.downsample if factor is None else factor, s.clamp)
 
-    def n_residuals(self, factor: int | None = None) -> int:
-        """Length of :meth:`residuals`' ``r``: pixel residuals plus one row per prior."""
-        return self.problem(factor).n_residuals + int(self.has_prior.sum())
-
     def _weighted_jacobian(self, J: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
         """``d(r / sigma) / dz``, with the priors' rows below."""
         J = J * dtheta / self.sigma
