@@ -65,6 +65,13 @@ class Objective:
         return self.model.vector
 
     @property
+    def reweighted(self) -> bool:
+        """Whether renders come from path-length recordings (every fitted parameter is an
+        absorption, the environment's scale or a sensor parameter): then evaluating at a seed
+        already used renders nothing (:attr:`abs.model.FitProblem.uses_recordings`)."""
+        return self.problem().uses_recordings
+
+    @property
     def has_prior(self) -> np.ndarray:
         """Which scalars have a prior (bool, shape (P,))."""
         return np.isfinite(self.prior_sd)

@@ -62,6 +62,8 @@ class FitSettings:
     refinement_steps : int
         Gauss-Newton steps on decorrelated renders after Levenberg-Marquardt (removes the bias
         that Monte-Carlo noise puts into a least-squares fit of one noisy render; 0: none).
+        Not run when every fitted parameter reweights from path-length recordings (absorption,
+        environment scale, sensor): raise ``spp`` instead, which those fits pay once.
     seed : int
         Base seed of all renders.
     tie : tuple of str

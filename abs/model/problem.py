@@ -25,6 +25,8 @@ numbers): the optimiser then sees a deterministic objective.
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import drjit as dr
@@ -36,6 +38,9 @@ from abs.model.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
 
 __all__ = ["FitProblem", "render_views"]
+
+#: Memory for a problem's path-length recordings (bytes); the least recently used go first.
+RECORDING_BYTES = 1 << 30
 
 
 def _view_seed(seed: int, view: int) -> int:
@@ -63,6 +68,9 @@ class FitProblem:
         Path length (default: the scene's).
     counter : RenderCounter
         Where renders are counted (shared by the problems of one model).
+    reweight : bool
+        Use path-length recordings (:mod:`abs.render.path_lengths`) when every fitted parameter
+        reweights from one (:attr:`uses_recordings`).
     """
 
     compiled: CompiledScene
@@ -71,10 +79,60 @@ class FitProblem:
     clamp: float | None = None
     max_depth: int | None = None
     counter: RenderCounter = field(default_factory=RenderCounter)
+    reweight: bool = True
+    _recordings: OrderedDict = field(default_factory=OrderedDict, repr=False)
 
     @property
     def n_residuals(self) -> int:
         return 3 * sum(o.pixels for o in self.observations)
+
+    # --------------------------------------------------------- recordings
+    @property
+    def recorded_material(self) -> str | None:
+        """The glass whose path lengths recordings keep: the owner of the fitted absorption
+        (``None`` when no absorption is fitted)."""
+        owners = sorted({self.compiled.specs[n].owner for n in self.vector.names
+                         if self.compiled.specs[n].reweighting == "absorption"})
+        return owners[0] if owners else None
+
+    @property
+    def uses_recordings(self) -> bool:
+        """Whether every render of this problem comes from path-length recordings: when each
+        fitted parameter is an absorption of one glass material, the environment's scale or a
+        sensor parameter. Then a render at another value of them is a reweighting, and only a new
+        seed (or spp) renders: a fit's Jacobians, line searches and a sampler's likelihood
+        evaluations render nothing."""
+        owners = {self.compiled.specs[n].owner for n in self.vector.names
+                  if self.compiled.specs[n].reweighting == "absorption"}
+        return (self.reweight and len(owners) <= 1
+                and not self.compiled.reweightable(self.vector.names, self.recorded_material))
+
+    def _fingerprint(self) -> str:
+        """A digest of every compiled value a recording depends on (those it cannot reweight),
+        so that a recording is never reused after something else changed the scene."""
+        material = self.recorded_material
+        digest = hashlib.sha1()
+        for name in sorted(self.compiled.values):
+            if self.compiled.reweightable([name], material):
+                digest.update(name.encode())
+                digest.update(self.compiled.get(name).tobytes())
+        return digest.hexdigest()
+
+    def _recording(self, observation: Observation, spp: int, seed: int):
+        """The recording of one view with ``(spp, seed)``, made on first use (one render)."""
+        key = (observation.name, spp, seed, self._fingerprint())
+        if key in self._recordings:
+            self._recordings.move_to_end(key)
+            return self._recordings[key]
+        material = self.recorded_material
+        recording = self.compiled.record(observation.camera, spp, seed, material=material,
+                                         max_depth=self.max_depth)
+        self.counter.add(observation.camera, spp)
+        self._recordings[key] = recording
+        while (len(self._recordings) > 1
+               and sum(r.nbytes for r in self._recordings.values()) > RECORDING_BYTES):
+            self._recordings.popitem(last=False)
+        return recording
 
     # ------------------------------------------------------------- values
     def set_values(self, theta: np.ndarray) -> None:
@@ -85,6 +143,11 @@ class FitProblem:
     def render(self, observation: Observation, theta: np.ndarray, spp: int, seed: int) -> np.ndarray:
         """Primal rendering (H, W, 3) of one observation at ``theta``."""
         self.set_values(theta)
+        if self.uses_recordings:
+            recording = self._recording(observation, spp, seed)
+            with dr.suspend_grad():
+                image = self.compiled.render_recorded(recording, observation.camera).numpy()
+            return image.astype(np.float64)
         with dr.suspend_grad():
             image = self.compiled.render(observation.camera, spp=spp, seed=seed,
                                          max_depth=self.max_depth).numpy()
@@ -179,16 +242,20 @@ class FitProblem:
     def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int):
         cam, p = obs.camera, self.vector.size
         self.set_values(theta)
+        recording = self._recording(obs, spp, seed) if self.uses_recordings else None
         image, jac = None, np.zeros((cam.height, cam.width, 3, p))
         for tangent, columns in self.column_passes():
             # Every pass renders with the same seed (the same samples), and every fitted
             # parameter is given a tangent (zero where not wanted), so that every column is
             # rendered alike (e.g. dispersive glass splits its paths in each).
             tangents = self.vector.tangents(tangent)
-            rendered, derivative = self.compiled.render_forward(
-                cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth)
-            for _ in range(self.compiled.forward_renders(tangents)):
-                self.counter.add(cam, spp)
+            if recording is not None:
+                rendered, derivative = self.compiled.render_recorded_forward(recording, cam, tangents)
+            else:
+                rendered, derivative = self.compiled.render_forward(
+                    cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth)
+                for _ in range(self.compiled.forward_renders(tangents)):
+                    self.counter.add(cam, spp)
             if image is None:
                 image = rendered.numpy().astype(np.float64)
             derivative = derivative.numpy()
@@ -210,6 +277,9 @@ class FitProblem:
         replay per view, whatever their number; parameters that move paths (IOR, roughness,
         pose) take one forward-mode render per scalar.
         """
+        if self.uses_recordings:  # the Jacobian is free: no replay needed
+            r, J = self.residuals(theta, spp, seed, jacobian=True, jacobian_seed=jacobian_seed)
+            return 0.5 * float(r @ r), J.T @ r
         slices = self.vector.slices()
         replayed = [n for n in self.vector.names if not self.compiled.specs[n].moves_paths]
         moving = [n for n in self.vector.names if self.compiled.specs[n].moves_paths]

@@ -58,6 +58,12 @@ class Parameter:
     typical_step : float or None
         The change over which images stay near linear in the parameter (its units), if the
         owner knows it better than the default of the fit's conditioning.
+    reweighting : str or None
+        How a path-length recording (:mod:`abs.render.path_lengths`) gives the image at another
+        value of the parameter without rendering again: ``"absorption"`` (Beer-Lambert over the
+        recorded lengths inside the owner material), ``"light_scale"`` (it multiplies all the
+        light), ``"after_paths"`` (the sensor, applied to the path tracer's image); ``None``:
+        a new value needs a new render.
     null : ndarray or None
         The value at which the parameter's effect is absent and the rendering is exactly the
         model without it (a roughness of 0, a pose of zeros, a linear response), ``size``
@@ -79,6 +85,7 @@ class Parameter:
     separable_channels: bool = False
     difference_step: float | None = None
     typical_step: float | None = None
+    reweighting: str | None = None
     null: np.ndarray | None = field(default=None, compare=False)
     setter: Setter | None = field(default=None, compare=False, repr=False)
 
@@ -108,6 +115,7 @@ def parameter_specs(scene) -> dict[str, Parameter]:
     env = scene.environment
     specs = {
         "environment.scale": Parameter("environment.scale", 1, "1", 0.0, INF, np.array([env.scale]),
+                                       reweighting="light_scale",
                                        setter=AttributeSetter("environment", "scale")),
         "environment.rotation": Parameter("environment.rotation", 1, "rad", -INF, INF,
                                           np.array([env.rotation]),
@@ -122,7 +130,7 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         specs[f"sensor.{field_name}"] = Parameter(
             f"sensor.{field_name}", size, unit, lower, upper,
             np.asarray(getattr(scene.sensor, field_name), np.float64),
-            separable_channels=field_name in ("response", "stray_light"),
+            separable_channels=field_name in ("response", "stray_light"), reweighting="after_paths",
             null=_null(null, size), setter=AttributeSetter("sensor", field_name))
     for name, material in scene.materials.items():
         for field_name, spec in material.parameters().items():
@@ -130,7 +138,7 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             specs[f"{name}.{field_name}"] = Parameter(
                 f"{name}.{field_name}", spec.size, spec.unit, spec.lower, spec.upper, initial,
                 spec.moves_paths, spec.separable_channels and spec.size == 3,
-                spec.difference_step, spec.typical_step,
+                spec.difference_step, spec.typical_step, spec.reweighting,
                 null=_null(spec.null, spec.size), setter=material.setter(field_name))
     for obj in scene.objects:
         specs[f"{obj.name}.{POSE_FIELD}"] = Parameter(

@@ -27,6 +27,7 @@ from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import from_numpy, opaque
+from abs.render.path_lengths import LengthBins, PathLengthRecording, length_bins, reweight
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
@@ -476,6 +477,133 @@ class CompiledScene:
             return recorded, {name: dr.grad(leaves[name]).numpy().astype(np.float64) for name in names}
         finally:
             for name in names:
+                self.set(name, from_numpy(mi.Float, self.get(name)))
+
+
+    # ------------------------------------------------------- recordings
+    def glass_material(self) -> str | None:
+        """The one glass material whose absorption a recording reweights by default: the only
+        transmissive material with an absorption field, ``None`` without glass."""
+        glass = [name for name, m in self.scene.materials.items()
+                 if m.transmissive and "absorption" in m.parameters()]
+        if len(glass) > 1:
+            raise ValueError(f"several glass materials ({', '.join(glass)}): name the one whose "
+                             "path lengths to record")
+        return glass[0] if glass else None
+
+    def record(self, camera: Camera, spp: int | None = None, seed: int = 0,
+               material: str | None = "auto", bins: LengthBins | None = None,
+               absorption_per_m=0.0, max_depth: int | None = None) -> PathLengthRecording:
+        """Render ``camera``'s view recording its light by path length inside ``material``.
+
+        :func:`~abs.render.path_lengths.reweight` (:meth:`render_recorded`) then gives the view
+        at any absorption of that material and any environment scale and sensor, with no further
+        render (see :mod:`abs.render.path_lengths`).
+
+        Parameters
+        ----------
+        material : str or None
+            The glass material (``"auto"``: :meth:`glass_material`; ``None``: no lengths, only
+            scale and sensor reweight).
+        bins : LengthBins, optional
+            Default: 64 nodes up to 4 diagonals of the bounding box of the material's objects.
+        absorption_per_m : float or array-like of 3
+            The absorption (1/m) to record at; 0 (the default) makes every reweighting an
+            attenuation, whose variance is at most the recording's.
+
+        Returns
+        -------
+        PathLengthRecording
+        """
+        spp = spp or self.scene.render.spp
+        material = self.glass_material() if material == "auto" else material
+        glass = None
+        if material is not None:
+            if "absorption" not in self.scene.materials[material].parameters():
+                raise ValueError(f"material {material!r} has no absorption to record lengths for")
+            shapes = [s for s in self.mitsuba_scene.shapes() if s.bsdf().id() == material]
+            if not shapes:
+                raise ValueError(f"no object of the scene is made of {material!r}")
+            glass = shapes[0].bsdf()
+            if bins is None:
+                box = mi.ScalarBoundingBox3f()
+                for shape in shapes:
+                    box.expand(shape.bbox())
+                bins = length_bins(float(dr.norm(box.extents())))
+        bins = bins or LengthBins(2, 1.0)
+        recorded = np.broadcast_to(np.asarray(absorption_per_m, np.float64), 3).copy()
+        name = f"{material}.absorption"
+        before = self.get(name) if material is not None else None
+        tracer = self._tracer(max_depth)
+        batches = self._batches(camera, spp, MAX_SAMPLES_IN_FLIGHT)
+        histogram = None
+        try:
+            if material is not None:
+                self.set(name, recorded)
+            with dr.suspend_grad():
+                for i, n in enumerate(batches):
+                    part = tracer.record(self.mitsuba_scene, self.environment, camera, n,
+                                         seed * 7919 + i if len(batches) > 1 else seed, glass, bins)
+                    part = part * opaque(mi.Float, n / spp)
+                    histogram = part if histogram is None else histogram + part
+                    dr.eval(histogram)
+                env_scale = float(dr.detach(self.environment.scale)[0])
+        finally:
+            if material is not None:
+                self.set(name, before)
+        histogram = histogram.numpy().reshape(camera.height, camera.width, 3, bins.slots)
+        return PathLengthRecording(histogram, bins, material, recorded, env_scale, spp, seed)
+
+    def reweightable(self, names, material: str | None) -> list[str]:
+        """Those of ``names`` that a recording of ``material``'s lengths does not give (empty:
+        every one reweights)."""
+        out = []
+        for name in names:
+            how = self._spec(name).reweighting
+            if how is None or (how == "absorption" and self._spec(name).owner != material):
+                out.append(name)
+        return out
+
+    def render_recorded(self, recording: PathLengthRecording, camera: Camera) -> mi.TensorXf:
+        """The view of ``recording`` at the current absorption, environment scale and sensor.
+
+        Every other parameter must be as it was during the recording, which the caller ensures
+        (:class:`~abs.model.FitProblem` keys its recordings by them).
+        """
+        radiance, _ = reweight(recording, *self._recorded_values(recording, camera))
+        return self.sensor.apply(mi.TensorXf(from_numpy(mi.Float, radiance), radiance.shape), camera)
+
+    def _recorded_values(self, recording: PathLengthRecording, camera: Camera):
+        if (camera.width, camera.height) != (recording.width, recording.height):
+            raise ValueError(f"the recording is {recording.width}x{recording.height}, the camera "
+                             f"{camera.width}x{camera.height}")
+        absorption = (recording.absorption_per_m if recording.material is None
+                      else self.get(f"{recording.material}.absorption"))
+        return absorption, float(self.get("environment.scale")[0])
+
+    def render_recorded_forward(self, recording: PathLengthRecording, camera: Camera,
+                                tangents: dict) -> tuple[mi.TensorXf, mi.TensorXf]:
+        """:meth:`render_forward` from a recording: the view and its derivative along
+        ``tangents``, which may name only parameters the recording reweights (the absorption in
+        closed form, the scale, the sensor by forward mode through it)."""
+        others = self.reweightable(tangents, recording.material)
+        if others:
+            raise ValueError(f"{', '.join(others)} change the light paths (or are not recorded): "
+                             "a recording cannot differentiate them")
+        zero = np.zeros(3)
+        d_absorption = (np.asarray(tangents.get(f"{recording.material}.absorption", zero), np.float64)
+                        if recording.material is not None else zero)
+        d_scale = float(np.asarray(tangents.get("environment.scale", 0.0)).ravel()[0])
+        radiance, derivative = reweight(recording, *self._recorded_values(recording, camera),
+                                        d_absorption=d_absorption, d_scale=d_scale)
+        sensor = {n: t for n, t in tangents.items() if self._spec(n).reweighting == "after_paths"}
+        self._push_tangents(sensor)
+        try:
+            return self._through_sensor_forward(
+                camera, mi.TensorXf(from_numpy(mi.Float, radiance), radiance.shape),
+                mi.TensorXf(from_numpy(mi.Float, derivative), derivative.shape))
+        finally:
+            for name in sensor:
                 self.set(name, from_numpy(mi.Float, self.get(name)))
 
 

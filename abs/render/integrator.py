@@ -65,6 +65,7 @@ from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
 from abs.render.jit import opaque, seed32
+from abs.render.path_lengths import LengthBins, bin_light
 
 __all__ = ["PathTracer", "MODES"]
 
@@ -180,14 +181,14 @@ class PathTracer:
         def body(sampler, ray, beta, radiance, active, prev_pdf, prev_delta, depth,
                  t_origin, t_direction, t_beta, t_radiance, t_pdf):
             if not forward:
-                light, ray, beta, active, prev_pdf, prev_delta = self._step(
+                light, ray, beta, active, prev_pdf, prev_delta, _ = self._step(
                     scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split)
                 return (sampler, ray, beta, radiance + light, active, prev_pdf, prev_delta,
                         depth + 1, t_origin, t_direction, t_beta, t_radiance, t_pdf)
             with dr.resume_grad():
                 ray_in = mi.Ray3f(_leaf(ray.o, t_origin), _leaf(ray.d, t_direction), ray.time,
                                   ray.wavelengths)
-                light, ray_out, beta_out, active, pdf_out, prev_delta = self._step(
+                light, ray_out, beta_out, active, pdf_out, prev_delta, _ = self._step(
                     scene, env, sampler, ray_in, _leaf(beta, t_beta), active,
                     _leaf(prev_pdf, t_pdf), prev_delta, depth, split)
                 # Not ClearInput: the parameters' tangents are sources of every iteration, and
@@ -245,7 +246,7 @@ class PathTracer:
 
         def body(sampler, ray, beta, remaining, active, prev_pdf, prev_delta, depth):
             with dr.resume_grad():
-                light, ray, beta_out, active, prev_pdf, prev_delta = self._step(
+                light, ray, beta_out, active, prev_pdf, prev_delta, _ = self._step(
                     scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split)
                 # What the rest of the path brings, and its derivative through this vertex's
                 # weight (beta_out / detach(beta_out): 1 in value, d weight / weight attached).
@@ -258,6 +259,51 @@ class PathTracer:
                     prev_delta, depth + 1)
 
         dr.while_loop(state, cond, body, max_iterations=self.max_depth, label="abs path replay")
+
+    def record(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int,
+               glass: mi.BSDF | None, bins: LengthBins, dispersion: str = "auto") -> mi.Float:
+        """Render one view recording its light by in-glass path length (a primal render).
+
+        Every vertex's light is binned at the total length its path has travelled inside
+        ``glass`` so far (:func:`~abs.render.path_lengths.bin_light`); the image at another
+        absorption of that glass then follows without rendering
+        (:func:`~abs.render.path_lengths.reweight`). The samples are those of :meth:`render`
+        with the same ``seed``: at the recording's own absorption the reweighted image is that
+        render's, up to float rounding.
+
+        Returns
+        -------
+        mi.Float
+            ``height * width * 3 * bins.slots`` floats: the histogram of
+            :class:`~abs.render.path_lengths.PathLengthRecording` (divided by ``spp``).
+        """
+        split = self._split(scene, dispersion)
+        histogram = dr.zeros(mi.Float, camera.width * camera.height * 3 * bins.slots)
+        target = None if glass is None else opaque(mi.UInt32, dr.reinterpret_array(
+            mi.UInt32, mi.BSDFPtr(glass))[0])
+        with dr.suspend_grad():
+            sampler, ray, pixel = self._camera_rays(camera, spp, seed)
+            state = (sampler, ray, mi.Color3f(1.0), mi.Bool(True), mi.Float(1.0), mi.Bool(True),
+                     mi.UInt32(0), mi.Float(0.0))
+
+            def cond(sampler, ray, beta, active, *rest):
+                return active
+
+            def body(sampler, ray, beta, active, prev_pdf, prev_delta, depth, length):
+                light, ray, beta, active, prev_pdf, prev_delta, glass_length = self._step(
+                    scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split,
+                    glass_id=target)
+                # This vertex's light has been attenuated along ``length``; the segment that
+                # ended here (if in the glass) attenuates the light of the vertices after it.
+                bin_light(histogram, pixel, light, length, bins)
+                return (sampler, ray, beta, active, prev_pdf, prev_delta, depth + 1,
+                        length + glass_length)
+
+            dr.while_loop(state, cond, body, max_iterations=self.max_depth,
+                          label="abs path tracer (recording)")
+            histogram = histogram * opaque(mi.Float, 1.0 / spp)
+            dr.eval(histogram)
+        return histogram
 
     # --------------------------------------------------------------- private
     @staticmethod
@@ -337,10 +383,13 @@ class PathTracer:
         return mi.TensorXf(flat, (h, w, 3))
 
     def _step(self, scene, env: Environment, sampler, ray, beta, active, prev_pdf, prev_delta,
-              depth, split):
+              depth, split, glass_id=None):
         """One path vertex: light reaching the camera from it, and the continued path.
 
-        Returns ``(light, ray, beta, active, prev_pdf, prev_delta)``.
+        Returns ``(light, ray, beta, active, prev_pdf, prev_delta, glass_length)``:
+        ``glass_length`` is the length (m) of the segment that ended here if it ran inside the
+        BSDF whose registry id is ``glass_id`` (a ``UInt32``; the segment whose Beer-Lambert factor this vertex's sample
+        weight applies), else 0; always 0 without ``glass_id``.
         """
         ctx = mi.BSDFContext()
         light = mi.Color3f(0.0)
@@ -363,6 +412,12 @@ class PathTracer:
             keep = mi.Color3f(*[dr.select(channel == c, 3.0, 0.0) for c in range(3)])
             beta = dr.select(glass, beta * keep, beta)
         si.time = mi.Float(channel)
+        glass_length = mi.Float(0.0)
+        if glass_id is not None:
+            # Compared as registry ids: pointer comparison fails inside symbolic loops.
+            inside = active & (dr.reinterpret_array(mi.UInt32, bsdf) == glass_id) & \
+                (mi.Frame3f.cos_theta(si.wi) < 0.0)
+            glass_length = dr.select(inside, si.t, 0.0)
 
         # Next-event estimation towards the environment (smooth lobes only).
         smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -386,7 +441,7 @@ class PathTracer:
         survive = sampler.next_1d(roulette) < q
         beta = dr.select(roulette, dr.select(survive, beta / dr.select(q > 0.0, q, 1.0), 0.0), beta)
         active &= ~roulette | survive
-        return light, ray, beta, active, prev_pdf, prev_delta
+        return light, ray, beta, active, prev_pdf, prev_delta, glass_length
 
     def _spread(self, scene, si, ray, sampler, active):
         """Move the shading point of surfaces with subsurface spread.

@@ -58,6 +58,10 @@ class ParameterSpec:
         (:func:`abs.model.parameters.typical_step`). An IOR needs it: the image of a
         checkerboard through a glass sphere is linear in the IOR over about 0.01 only, while the
         default (the distance from the bound, 0.5) let the first steps jump to IOR 2.
+    reweighting : str or None
+        ``"absorption"`` for a Beer-Lambert absorption inside the material, which a path-length
+        recording reweights without rendering again (:mod:`abs.render.path_lengths`); ``None``
+        otherwise.
     null : float or None
         The value (every entry) at which the effect the field models is absent, so that the
         material renders exactly as without it (an absorption or roughness of 0); ``None`` for a
@@ -75,6 +79,7 @@ class ParameterSpec:
     separable_channels: bool = False
     difference_step: float | None = None
     typical_step: float | None = None
+    reweighting: str | None = None
     null: float | None = None
 
 

@@ -36,7 +36,8 @@ class Dielectric(Material):
                                  separable_channels=True, difference_step=0.02, typical_step=0.03),
             # Null values: clear glass, polished surfaces (the diagnosis adds either effect there).
             "absorption": ParameterSpec("absorption", 3, "1/m", 0.0, float("inf"), "absorption",
-                                        separable_channels=True, null=0.0),
+                                        separable_channels=True, reweighting="absorption",
+                                        null=0.0),
             "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True,
                                        null=0.0),
         }

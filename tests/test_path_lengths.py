@@ -1,0 +1,148 @@
+"""Path-length recordings: one render gives the image at every absorption and environment scale.
+
+Without Russian roulette a render's paths do not depend on the absorption at all (it only scales
+what they carry), so a render at absorption ``sigma`` and a recording reweighted to ``sigma``,
+both with the same seed, must agree up to the binning's interpolation error. With roulette (as
+fits render) the samples differ and the two agree within Monte-Carlo noise.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from abs.camera.pinhole import intrinsics_from_fov, look_at
+from abs.render import Camera, compile_scene
+from abs.render.integrator import PathTracer
+from abs.render.path_lengths import PathLengthRecording, length_bins, reweight
+from abs.scene import load_scene
+
+W, H, SPP = 24, 18, 16
+RECORDED = np.array([2.0, 2.0, 2.0])  # 1/m
+
+
+@pytest.fixture(scope="module")
+def scene(small_scene_dir):
+    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    camera = Camera(intrinsics_from_fov(W, H, np.radians(30)), R, t, W, H)
+    return compiled, camera
+
+
+def _glass(compiled):
+    return next(s.bsdf() for s in compiled.mitsuba_scene.shapes() if s.bsdf().id() == "glass")
+
+
+@pytest.mark.parametrize("factor", [0.0, 1.0, 5.0, 10.0])
+def test_reweighting_equals_a_render_without_roulette(scene, factor):
+    compiled, camera = scene
+    before = compiled.get("glass.absorption")
+    tracer = PathTracer(max_depth=8, rr_depth=8)  # no roulette: the same paths at every sigma
+    bins = length_bins(0.173)  # the 10 cm sphere's bounding-box diagonal
+    try:
+        compiled.set("glass.absorption", RECORDED)
+        histogram = tracer.record(compiled.mitsuba_scene, compiled.environment, camera, SPP, 3,
+                                  _glass(compiled), bins)
+        recording = PathLengthRecording(histogram.numpy().reshape(H, W, 3, -1), bins, "glass",
+                                        RECORDED, 1.0, SPP, 3)
+        sigma = factor * RECORDED * np.array([1.0, 1.5, 0.5])
+        compiled.set("glass.absorption", sigma)
+        with dr.suspend_grad():
+            direct = tracer.render(compiled.mitsuba_scene, compiled.environment, camera, SPP, 3).numpy()
+        reweighted = reweight(recording, sigma, 1.0)[0]
+    finally:
+        compiled.set("glass.absorption", before)
+    # Linear interpolation of exp(-d sigma L) between nodes: relative error <= (d sigma h)^2 / 8.
+    bound = (np.max(np.abs(sigma - RECORDED)) * bins.spacing) ** 2 / 8
+    np.testing.assert_allclose(reweighted, direct, rtol=1.5 * bound + 1e-5, atol=1e-6)
+    if factor != 1.0:  # the glass's pixels did change: the check compares something
+        assert np.max(np.abs(direct - reweight(recording, RECORDED, 1.0)[0])) > 0.01
+
+
+def test_reweighting_with_roulette_is_unbiased(scene):
+    """Fits render with Russian roulette, whose decisions depend on the absorption: reweighted
+    and direct renders then differ sample by sample but agree in expectation."""
+    compiled, camera = scene
+    before = compiled.get("glass.absorption")
+    recording = compiled.record(camera, spp=64, seed=1)  # at absorption 0
+    try:
+        sigma = np.array([20.0, 5.0, 40.0])
+        compiled.set("glass.absorption", sigma)
+        reweighted = compiled.render_recorded(recording, camera).numpy()
+        direct = np.stack([compiled.render(camera, spp=64, seed=10 + k).numpy() for k in range(4)])
+        clear = reweight(recording, np.zeros(3), 1.0)[0]
+    finally:
+        compiled.set("glass.absorption", before)
+    glass = np.abs(clear - reweighted).sum(axis=-1) > 0.02  # pixels the absorption darkens
+    assert glass.sum() > 20
+    difference = reweighted[glass] - direct.mean(axis=0)[glass]
+    spread = np.std(direct[:, glass], axis=0, ddof=1)
+    standard_error = np.sqrt(np.sum(spread ** 2 * (1 + 1 / 4), axis=0)) / glass.sum()
+    z = np.mean(difference, axis=0) / standard_error
+    assert np.all(np.abs(z) < 4), z
+    # What the test guards against: light left at zero length is far off (darkening missed).
+    assert np.all(np.abs(np.mean(clear[glass] - direct.mean(axis=0)[glass], axis=0))
+                  > 8 * standard_error)
+
+
+def test_same_samples_as_a_render_at_the_recording_absorption(scene):
+    compiled, camera = scene
+    recording = compiled.record(camera, spp=SPP, seed=5, absorption_per_m=compiled.get("glass.absorption"))
+    direct = compiled.render(camera, spp=SPP, seed=5).numpy()
+    np.testing.assert_allclose(compiled.render_recorded(recording, camera).numpy(), direct,
+                               rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("name, tangent", [("glass.absorption", [1.0, 0.0, 0.0]),
+                                           ("glass.absorption", [0.0, 0.0, 1.0]),
+                                           ("environment.scale", [1.0]),
+                                           ("sensor.stray_light", [0.0, 1.0, 0.0])])
+def test_closed_form_derivative_matches_finite_differences(scene, name, tangent):
+    compiled, camera = scene
+    recording = compiled.record(camera, spp=SPP, seed=2)
+    x0 = compiled.get(name)
+    image, derivative = compiled.render_recorded_forward(recording, camera, {name: tangent})
+    h = 1e-2 * max(1.0, float(np.max(np.abs(x0))))
+    try:
+        compiled.set(name, x0 + h * np.asarray(tangent))
+        upper = compiled.render_recorded(recording, camera).numpy().astype(np.float64)
+        compiled.set(name, x0 - h * np.asarray(tangent))
+        lower = compiled.render_recorded(recording, camera).numpy().astype(np.float64)
+    finally:
+        compiled.set(name, x0)
+    difference = (upper - lower) / (2 * h)
+    assert np.max(np.abs(difference)) > 1e-3
+    np.testing.assert_allclose(derivative.numpy(), difference, rtol=2e-2, atol=2e-4 * np.max(np.abs(difference)))
+    np.testing.assert_allclose(image.numpy(), compiled.render_recorded(recording, camera).numpy())
+
+
+def test_absorption_derivative_matches_forward_mode_without_roulette(scene):
+    """The closed form ``-sum f L exp(-sigma L)`` against the renderer's own forward mode."""
+    compiled, camera = scene
+    tracer = PathTracer(max_depth=8, rr_depth=8)
+    glass = _glass(compiled)
+    bins = length_bins(0.173)
+    sigma = compiled.get("glass.absorption")
+    histogram = tracer.record(compiled.mitsuba_scene, compiled.environment, camera, SPP, 4, glass, bins)
+    recording = PathLengthRecording(histogram.numpy().reshape(H, W, 3, -1), bins, "glass", sigma,
+                                    1.0, SPP, 4)
+    _, closed = compiled.render_recorded_forward(recording, camera, {"glass.absorption": [1.0, 1.0, 1.0]})
+    compiled._push_tangents({"glass.absorption": [1.0, 1.0, 1.0]})
+    try:
+        _, forward = tracer.render_forward(compiled.mitsuba_scene, compiled.environment, camera, SPP, 4)
+    finally:
+        compiled.set("glass.absorption", sigma)
+    closed = closed.numpy()
+    assert np.min(closed) < -1e-3
+    np.testing.assert_allclose(closed, forward.numpy(), rtol=1e-2, atol=1e-5)
+
+
+def test_recording_refuses_parameters_that_move_paths(scene):
+    compiled, camera = scene
+    recording = compiled.record(camera, spp=1)
+    with pytest.raises(ValueError, match="glass.ior change the light paths"):
+        compiled.render_recorded_forward(recording, camera, {"glass.ior": [1.0, 1.0, 1.0]})
+    assert compiled.reweightable(["glass.absorption", "environment.scale", "sensor.response",
+                                  "glass.ior"], "glass") == ["glass.ior"]
