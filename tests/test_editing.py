@@ -345,6 +345,12 @@ def test_merl_edit_with_the_shared_fits():
     assert body[:, 2].mean() > body[:, 0].mean()            # blue rubber is blue
 
 
+def test_a_given_highlight_threshold_replaces_the_histograms():
+    photo, mask = synthetic_photo()
+    result = edit(photo, mask, "glass", settings=EditSettings(highlight_threshold=1e9))
+    assert result.highlight_threshold == 1e9 and not result.highlights.any()
+
+
 def test_texture_edit_shows_the_texture():
     photo, mask = synthetic_photo()
     stripes = np.zeros((8, 8, 3), np.float32)

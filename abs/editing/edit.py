@@ -66,6 +66,10 @@ class EditSettings:
         ``a`` of dark glass (paper: 1.2 to 1.4).
     highlight_bins : int or None
         Bins of the luminance histogram for the highlight threshold (``None``: ``sqrt(pixels)``).
+    highlight_threshold : float or None
+        A luminance threshold to use instead of the histogram's (same unit as the photograph).
+        The paper's rule marks the upper flank of a broad body-colour distribution as highlight
+        (under environment light, half of a plastic sphere: benchmarks/material_edit.py).
     merl_dir : str or None
         Folder of real MERL ``.binary`` files; ``None``: the shared neural fits.
     """
@@ -84,6 +88,7 @@ class EditSettings:
     texture_blend: float = 0.1
     dark_exponent: float = DARK_EXPONENT
     highlight_bins: int | None = None
+    highlight_threshold: float | None = None
     merl_dir: str | None = None
 
 
@@ -207,7 +212,8 @@ def edit(photo, mask, to: str | MaterialSpec = "glossier", method: str = "baseli
     normals = normals_from_gradients(gx, gy)
     background = fill_background(rgb, m)
     environment = environment_from_photograph(background, settings.environment_width)
-    threshold = highlight_threshold(lum, m, settings.highlight_bins)
+    threshold = (highlight_threshold(lum, m, settings.highlight_bins)
+                 if settings.highlight_threshold is None else float(settings.highlight_threshold))
     strength = default_strength(m) if settings.strength is None else settings.strength
 
     if spec.kind in ("glossier", "diffuse"):
