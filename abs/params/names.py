@@ -100,7 +100,14 @@ class Parameter:
 
 
 def _null(value, size: int) -> np.ndarray | None:
-    return None if value is None else np.full(size, float(value))
+    """``size`` entries from one number for all of them, or from ``size`` numbers."""
+    return None if value is None else np.broadcast_to(np.asarray(value, np.float64), (size,)).copy()
+
+
+#: Conditioning steps of sensor fields that the default (by unit and bound) would misjudge: a
+#: colour matrix's diagonal sits at 1, its off-diagonal at 0, yet a change of 0.05 in any entry
+#: is a 5 % change of a channel.
+_SENSOR_STEPS = {"colour_matrix": 0.05}
 
 
 def parameter_specs(scene) -> dict[str, Parameter]:
@@ -123,6 +130,7 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             f"sensor.{field_name}", size, unit, lower, upper,
             np.asarray(getattr(scene.sensor, field_name), np.float64),
             separable_channels=field_name in ("response", "stray_light"),
+            typical_step=_SENSOR_STEPS.get(field_name),
             null=_null(null, size), setter=AttributeSetter("sensor", field_name))
     for name, material in scene.materials.items():
         for field_name, spec in material.parameters().items():

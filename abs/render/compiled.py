@@ -87,7 +87,8 @@ class CompiledScene:
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
                                        spec.inverse_distance, spec.center)
-        self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light)
+        self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
+                             scene.sensor.colour_matrix)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}
@@ -259,8 +260,8 @@ class CompiledScene:
         """Render ``camera``'s view at the scene's ``[render]`` settings unless overridden.
 
         Returns a ``TensorXf`` of shape ``(height, width, 3)``: the radiance as the sensor records
-        it (``[sensor]``: vignetting, stray light, response; linear RGB radiance when those are at
-        their null values), attached to the AD graph of every parameter set with gradients enabled
+        it (``[sensor]``: vignetting, stray light, colour matrix, response; linear RGB radiance
+        when those are at their null values), attached to the AD graph of every parameter set with gradients enabled
         (then ``dr.backward`` and ``dr.forward_to`` work on it; for one directional derivative,
         :meth:`render_forward` is faster and needs far less memory).
         """

@@ -146,9 +146,32 @@ def _pose_field(fields: Fields, name: str) -> SceneError:
 def _sensor(fields: Fields) -> SensorSpec:
     """``[sensor]``: every field optional, each defaulting to its null value."""
     fields.check_known(set(SensorSpec.FIELDS))
-    values = {key: fields.vector(key, size, default=null, lower=lower, upper=upper)
-              for key, (size, _, lower, upper, null) in SensorSpec.FIELDS.items()}
-    return SensorSpec(**values)
+    values = {key: fields.vector(key, size, default=SensorSpec.null(key), lower=lower, upper=upper)
+              for key, (size, _, lower, upper, _) in SensorSpec.FIELDS.items()
+              if key != "colour_matrix"}
+    return SensorSpec(**values, colour_matrix=_colour_matrix(fields))
+
+
+def _colour_matrix(fields: Fields) -> np.ndarray:
+    """``[sensor] colour_matrix``: 9 numbers row-major, or 3 rows of 3 (identity when absent).
+
+    One number is not accepted (unlike the per-channel fields): ``colour_matrix = 1`` would
+    read as the identity but mean a matrix of ones. The determinant must be positive: a colour
+    matrix that is singular or flips the colour space is a malformed value, not a calibration
+    error.
+    """
+    key = "colour_matrix"
+    if not fields.has(key):
+        return SensorSpec.null(key)
+    value = fields.raw(key)
+    nested = isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value)
+    if not isinstance(value, list) or (len(value) != 9 and not nested):
+        raise fields.error(key, f"expected 9 numbers (row-major) or 3 rows of 3 numbers, got {value!r}")
+    matrix = (fields.array(key, (3, 3)) if nested else fields.array(key, (9,))).ravel()
+    if np.linalg.det(matrix.reshape(3, 3)) <= 1e-6:
+        raise fields.error(key, f"the matrix must have a positive determinant (a colour transform "
+                                f"near the identity), got det = {np.linalg.det(matrix.reshape(3, 3)):.3g}")
+    return matrix
 
 
 def _fit_parameters(fit_fields: Fields, known: dict) -> tuple[str, ...]:

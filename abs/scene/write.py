@@ -133,6 +133,8 @@ def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     environment["center"] = np.asarray(env.center, np.float64).tolist()
     sensor = {key: values.get(f"sensor.{key}", np.asarray(getattr(scene.sensor, key), np.float64).tolist())
               for key in type(scene.sensor).FIELDS}
+    # Three rows of three read as the matrix they are (the loader takes either form).
+    sensor["colour_matrix"] = np.asarray(sensor["colour_matrix"], np.float64).reshape(3, 3).tolist()
 
     objects = []
     for obj in scene.objects:
