@@ -72,6 +72,12 @@ def _filmic_response(compiled, camera, spp, seed, white):
     return filmic_response(_model(compiled, camera, spp, seed), white)
 
 
+def _white_balance_shift(compiled, camera, spp, seed, cct):
+    from abs.render.sensor_truth import white_balance_shift
+
+    return white_balance_shift(_model(compiled, camera, spp, seed), cct)
+
+
 def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
     from abs.render.medium_truth import render_with_medium
 
@@ -84,6 +90,7 @@ TRUTH_RENDERERS = {
     "veiling_glare": _veiling_glare,             # blurred image + floor, not a constant offset
     "filmic_response": _filmic_response,         # Reinhard curve, not a power law
     "scattering_cloth": _scattering_cloth,       # volumetric slab in volpath, not a spread exit point
+    "white_balance_shift": _white_balance_shift,  # Bradford adaptation in XYZ (colour-science)
 }
 
 
@@ -110,6 +117,11 @@ CASES = [
          photographs=("filmic_response", {"white": 3.0})),
     Case("box-vignetting", "box", ("vignetting",), photographs=("natural_vignetting", {"strength": 0.6})),
     Case("box-null", "box", ()),
+    # A 5500 K white balance error: red up 4 %, blue down 16 %, some green into red.
+    Case("sphere-colour_transform", "sphere", ("colour_transform",),
+         photographs=("white_balance_shift", {"cct": 5500})),
+    Case("box-colour_transform", "box", ("colour_transform",),
+         photographs=("white_balance_shift", {"cct": 5500})),
     Case("box-absorption+stray_light", "box", ("absorption", "stray_light"),
          {"glass.absorption": [3.0, 6.0, 10.0]},
          ("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
@@ -118,7 +130,8 @@ CASES = [
 #: The quick default: every effect once, a two-effect case and both nulls.
 QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
-         "box-pose", "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
+         "box-pose", "box-camera_response", "sphere-colour_transform", "sphere-null", "box-null",
+         "sphere-absorption+vignetting"]
 
 
 def _conftest() -> None:
