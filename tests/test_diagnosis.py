@@ -124,6 +124,13 @@ def test_cli_finds_concealed_stray_light_and_writes_the_contract(diagnosis_scene
     recovered = np.array(finding["parameters"]["sensor.stray_light"])
     # Roughly: the offset trades off with the fitted environment scale.
     assert np.all(np.abs(recovered - truth) < 0.5 * np.array(truth)), recovered
+    # Compensation: without the offset the fit brightened the environment to lift the dark
+    # parts; once the offset is fitted the scale comes back down, by more than the standard
+    # error the fit without it claimed, and the explanation says so.
+    (shift,) = finding["compensation"]
+    assert shift["parameter"] == "environment.scale" and shift["compensating"], shift
+    assert shift["after"][0] < shift["before"][0] and shift["shift_in_stderr"][0] < -1, shift
+    assert "environment.scale" in finding["explanation"]
     assert (out / "report" / "report.html").exists()
 
     # Resumable: every model fit left a checkpoint; a resumed run continues the finished fits
