@@ -1,5 +1,13 @@
 """``colour_transform``: the photographs' colours are a 3x3 matrix of the rendering's, a colour
-shift over the whole image (a colour calibration or white-balance error, filter cross-talk)."""
+shift over the whole image (a colour calibration or white-balance error, filter cross-talk).
+
+The matrix's overall gain is the same image change as any fitted brightness (``environment.scale``:
+``k M`` with the scale divided by ``k`` renders the same image), so a free fit drifts along that
+line (measured: the diagonal ran to 5474 while the scale fell to its bound of 0). The effect
+therefore adds a weak Gaussian prior that says what the effect is, a transform near the identity
+(:data:`PRIOR_SD` per entry), unless the scene file already gives one; the photographs decide
+everything else.
+"""
 
 from __future__ import annotations
 
@@ -10,11 +18,21 @@ from abs.diagnosis.effects.sensor_field import SensorField
 
 _CHANNELS = "RGB"
 
+#: Standard deviation of the prior on every entry of the matrix around the identity
+#: (dimensionless): wide against a white-balance error (a 5500 K error moves the blue gain by
+#: 0.16), narrow against the drift along the brightness gauge.
+PRIOR_SD = 0.25
+
 
 @register
 class ColourTransform(SensorField):
     name = "colour_transform"
     field = "colour_matrix"
+
+    def add(self, data: dict, target: str) -> None:
+        super().add(data, target)
+        priors = data.setdefault("fit", {}).setdefault("priors", {})
+        priors.setdefault(self.parameter, {"mean": np.eye(3).ravel().tolist(), "sd": PRIOR_SD})
 
     def explain(self, target: str, values: dict) -> str:
         m = np.asarray(values[self.parameter], float).reshape(3, 3)
