@@ -1,7 +1,8 @@
 """The catalogue of a scene's differentiable parameters.
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
-``environment.rotation``, ``environment.inverse_distance``, ``sensor.<field>``, ``<object>.pose``.
+``environment.rotation``, ``environment.orientation``, ``environment.inverse_distance``,
+``sensor.<field>``, ``<object>.pose``.
 Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
 bounds to unconstrained variables.
 
@@ -123,6 +124,12 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         "environment.inverse_distance": Parameter(
             "environment.inverse_distance", 1, "1/m", 0.0, INF, np.array([env.inverse_distance]),
             null=np.zeros(1), setter=AttributeSetter("environment", "inverse_distance")),
+        # A rotation vector turning the map about all three axes; zeros: the orientation the
+        # scene file gives. Lookups move, light paths do not (like ``rotation``).
+        "environment.orientation": Parameter(
+            "environment.orientation", 3, "rad, rad, rad", -INF, INF,
+            np.asarray(env.orientation, np.float64), null=np.zeros(3),
+            setter=AttributeSetter("environment", "orientation")),
     }
     for field_name, (size, unit, lower, upper, null) in type(scene.sensor).FIELDS.items():
         # A response exponent and a stray-light level per channel act on their channel alone.

@@ -27,6 +27,7 @@ from abs.render.edges import MovingMesh, edge_adjacency
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import from_numpy, opaque
+from abs.render.rotation import rotation_matrix
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
@@ -41,18 +42,6 @@ MAX_SAMPLES_IN_FLIGHT = 1 << 21
 # The computation lives here, in the renderer bridge, because abs.scene (where the materials are)
 # sits below abs.render and must not import it (docs/architecture.md).
 _DRJIT_BINDINGS = {"brdf_pca": bind_coefficients}
-
-
-def rotation_matrix(r) -> mi.Matrix3f:
-    """Rotation matrix of a rotation vector ``r`` (axis * angle, radians); differentiable at 0."""
-    theta2 = dr.squared_norm(r)
-    theta = dr.sqrt(theta2 + 1e-24)
-    small = theta2 < 1e-8
-    a = dr.select(small, 1.0 - theta2 / 6.0, dr.sin(theta) / theta)
-    b = dr.select(small, 0.5 - theta2 / 24.0, (1.0 - dr.cos(theta)) / dr.square(theta))
-    x, y, z = r.x, r.y, r.z
-    k = mi.Matrix3f(0.0, -z, y, z, 0.0, -x, -y, x, 0.0)
-    return mi.Matrix3f(1.0) + a * k + b * (k @ k)
 
 
 def _mesh_dict(obj) -> dict:
@@ -86,7 +75,7 @@ class CompiledScene:
         self.shape_ids: dict[str, str] = shape_ids(scene)
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
-                                       spec.inverse_distance, spec.center)
+                                       spec.inverse_distance, spec.center, spec.orientation)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
                              scene.sensor.colour_matrix)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))

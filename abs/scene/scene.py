@@ -28,9 +28,11 @@ class RenderSettings:
 class EnvironmentSpec:
     """``[environment]``: a lat-long HDR map, at infinity unless ``inverse_distance`` > 0.
 
-    ``rotation`` (radians, about world +y) is applied after ``to_world``. With
-    ``inverse_distance`` = 1/R > 0 (1/m) the map lies on a sphere of radius R metres around
-    ``center`` (world, metres), and light from it shows parallax.
+    ``rotation`` (radians, about world +y) is applied after ``to_world``, and ``orientation``
+    after both: a correction of the map's orientation about all three axes, a rotation vector
+    (axis times angle, radians, world frame; zeros: none). With ``inverse_distance`` = 1/R > 0
+    (1/m) the map lies on a sphere of radius R metres around ``center`` (world, metres), and
+    light from it shows parallax.
     """
 
     file: Path
@@ -39,6 +41,7 @@ class EnvironmentSpec:
     rotation: float = 0.0
     inverse_distance: float = 0.0
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)
@@ -69,7 +72,7 @@ class SensorSpec:
         "response": (3, "1", 0.2, 5.0, 1.0),
         "stray_light": (3, "radiance", 0.0, float("inf"), 0.0),
         # A real camera's colour matrix can have negative entries (cross-talk correction), so
-        # no entry is bounded; the loader asks for a positive determinant instead.
+        # no entry is bounded.
         "colour_matrix": (9, "1", -float("inf"), float("inf"), tuple(np.eye(3).ravel())),
     }
 
