@@ -124,6 +124,7 @@ class Sensor:
         for j in range(3):
             # Sum of M_c0 x_0 + M_c1 x_1 + M_c2 x_2 in a fixed order: at M = I each product off
             # the diagonal is +-0 and the diagonal one is x_c itself, so the sum is x_c exactly.
-            term = dr.gather(mi.Float, self.colour_matrix, 3 * channel + j) * dr.gather(mi.Float, flat, base + j)
+            m = dr.gather(mi.Float, self.colour_matrix, 3 * channel + j)
+            term = m * dr.gather(mi.Float, flat, base + j)
             out = term if out is None else out + term
         return out
