@@ -124,6 +124,13 @@ def test_cli_finds_concealed_stray_light_and_writes_the_contract(diagnosis_scene
     recovered = np.array(finding["parameters"]["sensor.stray_light"])
     # Roughly: the offset trades off with the fitted environment scale.
     assert np.all(np.abs(recovered - truth) < 0.5 * np.array(truth)), recovered
+    # Compensation: without the offset the fit brightened the environment to lift the dark
+    # parts; once the offset is fitted the scale comes back down, by more than the standard
+    # error the fit without it claimed, and the explanation says so.
+    (shift,) = finding["compensation"]
+    assert shift["parameter"] == "environment.scale" and shift["compensating"], shift
+    assert shift["after"][0] < shift["before"][0] and shift["shift_in_stderr"][0] < -1, shift
+    assert "environment.scale" in finding["explanation"]
     assert (out / "report" / "report.html").exists()
 
     # Resumable: every model fit left a checkpoint; a resumed run continues the finished fits
@@ -137,6 +144,54 @@ def test_cli_finds_concealed_stray_light_and_writes_the_contract(diagnosis_scene
     assert [c.stat().st_mtime_ns for c in checkpoints] == stamps
     again = json.loads((out / "diagnosis.json").read_text())
     assert _differences(again, d) == [], _differences(again, d)
+
+
+@pytest.mark.slow
+def test_a_white_balance_error_is_named_a_colour_transform(diagnosis_scene, tmp_path):
+    """Photographs with a 5500 K white-balance error (colour-science's Bradford adaptation, not
+    abs's colour matrix): ``colour_transform`` is named first, among the sensor effects that
+    also tint or lift channels, and the fitted matrix times the refitted scale (their product is
+    what the photographs fix) is near the true one."""
+    from abs.diagnosis import diagnose
+    from abs.fitting import FitSettings
+    from abs.render.sensor_truth import white_balance_matrix, white_balance_shift
+    from abs.simulate import simulate_capture
+
+    def photograph(compiled, camera, spp, seed):
+        return white_balance_shift(compiled.render(camera, spp=spp, seed=seed).numpy(), 5500)
+
+    simulate_capture(load_scene(diagnosis_scene), tmp_path / "capture", n_cameras=3, width=32,
+                     height=24, spp=256, shot_noise=1e-4, read_noise=0.003, seed=4, render=photograph)
+    result = diagnose(diagnosis_scene, tmp_path / "capture",
+                      FitSettings(spp=8, downsample=1, max_iterations=6, refinement_steps=2, eval_spp=32),
+                      only=_EFFECTS.split(",") + ["colour_transform", "camera_response"])
+    assert result.verdict[:1] == ["colour_transform"], [(s.candidate.label, s.statistic)
+                                                        for s in result.candidates]
+    finding = result.findings[0]
+    assert "colour shift over the whole image" in finding.explanation
+    assert finding.comparison.holdout_rmse_after < finding.comparison.holdout_rmse_before
+    # Measured: within 0.035 of the truth (the blue gain 0.871 for 0.840).
+    product = (np.asarray(finding.parameters["sensor.colour_matrix"])
+               * result.final.values["environment.scale"][0])
+    assert np.abs(product - white_balance_matrix(5500).ravel()).max() < 0.06, product
+
+
+def test_a_prior_pins_the_step_along_a_direction_the_photographs_leave_free():
+    """A colour matrix's gain against a fitted brightness: two columns equal up to noise. The
+    score test's Gauss-Newton step without a prior runs off along their difference; with the
+    effect's prior it stays near what the photographs ask for."""
+    from abs.diagnosis.score import _step
+
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=400)
+    J = np.column_stack([a, a + 1e-9 * rng.normal(size=400)])
+    r = -0.1 * a + 1e-3 * rng.normal(size=400)
+    none = np.full(2, np.inf)
+    free = _step(J, r, 1e-6, np.zeros(2), np.zeros(2), none)
+    pinned = _step(J, r, 1e-6, np.zeros(2), np.zeros(2), np.array([np.inf, 0.25]))
+    assert np.abs(free).max() > 10  # the noise decides
+    np.testing.assert_allclose(pinned.sum(), 0.1, rtol=0.05)  # what the photographs ask for
+    assert abs(pinned[1]) < 0.05  # the rest on the unconstrained direction's prior mean
 
 
 @pytest.mark.slow

@@ -15,6 +15,10 @@ improve (``abs diagnose``).
    its work alone (the earlier one no longer improves holdout and BIC), the earlier one was
    soaking up the later one's signature and is dropped.
 
+Every finding also says how the parameters fitted before its effect was added moved when it was
+added (:mod:`.compensation`), flagging those that moved by more than their standard error: they
+were making up for the missing effect.
+
 :class:`Diagnosis` holds everything; :meth:`Diagnosis.to_json` is ``diagnosis.json`` (a public
 contract, see ``docs/diagnosis.md``). Storage, progress and the report are the caller's.
 """
@@ -29,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from abs.diagnosis.compensation import Shift, describe_shifts, parameter_shifts
 from abs.diagnosis.effects import Candidate, effect, effects
 from abs.diagnosis.localise import Region, ResidualMap, breakdown, find_regions, residual_maps
 from abs.diagnosis.model import extend_scene
@@ -55,19 +60,28 @@ class Round:
 
 @dataclass
 class Finding:
-    """An accepted effect."""
+    """An accepted effect.
+
+    Attributes
+    ----------
+    compensation : list of Shift
+        How each parameter of the model without the effect moved when the effect was added (in
+        the round it was accepted), in that model's standard errors.
+    """
 
     candidate: Candidate
     explanation: str
     parameters: dict[str, list]
     comparison: Comparison
     evidence: dict
+    compensation: list[Shift] = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {"effect": self.candidate.effect, "explanation": self.explanation,
                 "parameters": self.parameters,
                 "holdout_rmse_before": self.comparison.holdout_rmse_before,
                 "holdout_rmse_after": self.comparison.holdout_rmse_after,
+                "compensation": [s.to_json() for s in self.compensation],
                 "evidence": self.evidence}
 
 
@@ -111,8 +125,22 @@ def _truth(capture, names) -> dict | None:
     return read_truth(capture.folder, names)
 
 
+def _explanation(candidate: Candidate, values: dict, compensation: list[Shift]) -> str:
+    """The effect's physical reading of ``values``, then the parameters it showed compensating."""
+    text = effect(candidate.effect).explain(candidate.target, values)
+    flagged = describe_shifts(compensation)
+    return f"{text} {flagged}" if flagged else text
+
+
+def _shifts(reference: ModelFit, trial: ModelFit) -> list[Shift]:
+    """How the reference model's fitted parameters moved in ``trial`` (see :mod:`.compensation`)."""
+    result = reference.result
+    return parameter_shifts(result.values, result.vector.split(result.uncertainty.stderr),
+                            trial.result.values)
+
+
 def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, capture,
-             round_index: int) -> Finding:
+             round_index: int, reference: ModelFit) -> Finding:
     c = score.candidate
     stderr = trial.result.vector.split(trial.result.uncertainty.stderr)
     evidence = {"target": c.target, "round": round_index + 1, "score": round(score.statistic, 3),
@@ -128,7 +156,8 @@ def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, cap
     if truth:
         evidence["truth"] = truth
     values = {p: trial.values[p].tolist() for p in c.parameters}
-    return Finding(c, effect(c.effect).explain(c.target, trial.values), values, comparison, evidence)
+    shifts = _shifts(reference, trial)
+    return Finding(c, _explanation(c, trial.values, shifts), values, comparison, evidence, shifts)
 
 
 def _clear_winner(first: tuple, runner_up: CandidateScore) -> bool:
@@ -273,7 +302,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         if not passed:
             break
         s, trial, comparison = min(passed, key=lambda t: t[2].delta_bic)
-        findings.append(_finding(s, trial, comparison, capture, r))
+        findings.append(_finding(s, trial, comparison, capture, r, round_.control))
         accepted.append(s.candidate)
         current = trial
 
@@ -296,7 +325,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                 current = reduced
         for f in findings:
             f.parameters = {p: current.values[p].tolist() for p in f.candidate.parameters}
-            f.explanation = effect(f.candidate.effect).explain(f.candidate.target, current.values)
+            f.explanation = _explanation(f.candidate, current.values, f.compensation)
     if tmp is not None:
         tmp.cleanup()
     return Diagnosis(baseline, current, maps, regions, summary, rounds, findings,

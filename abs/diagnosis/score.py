@@ -94,6 +94,45 @@ def _projected(X: np.ndarray, r: np.ndarray) -> np.ndarray:
     return (X / scale) @ coef
 
 
+def _priors(scene, vector: ParameterVector) -> tuple[np.ndarray, np.ndarray]:
+    """Prior means and standard deviations of ``vector``'s scalars from the scene's
+    ``[fit.priors]`` (sd ``inf`` where a scalar has none)."""
+    mean, sd = np.zeros(vector.size), np.full(vector.size, np.inf)
+    for name, where in vector.slices().items():
+        prior = scene.fit_priors.get(name)
+        if prior is not None and prior.mean.size == where.stop - where.start:
+            mean[where], sd[where] = prior.mean, prior.sd
+    return mean, sd
+
+
+def _step(J: np.ndarray, r: np.ndarray, sigma2: float, theta: np.ndarray, prior_mean: np.ndarray,
+          prior_sd: np.ndarray) -> np.ndarray:
+    """One Gauss-Newton step from ``theta`` for residuals ``r`` with Jacobian ``J``, with the
+    scalars' Gaussian priors as extra rows weighed against the pixel noise ``sigma2``.
+
+    Without priors it is the plain least-squares step. A direction the photographs do not
+    constrain (a colour matrix's overall gain against a fitted brightness: ``k M`` and the scale
+    over ``k`` render alike) is singular but for Monte-Carlo noise, and its step would be
+    arbitrarily large (measured: a colour matrix's diagonal started at 5474); the effect's prior
+    (:mod:`abs.diagnosis.effects.colour_transform`) pins it, as it does in the fit.
+    """
+    has = np.isfinite(prior_sd)
+    if not has.any():
+        scale = np.linalg.norm(J, axis=0)
+        scale[scale == 0] = 1.0
+        step, *_ = np.linalg.lstsq(J / scale, -r, rcond=1e-10)
+        return step / scale
+    sigma = np.sqrt(max(sigma2, 1e-300))
+    rows = np.zeros((int(has.sum()), J.shape[1]))
+    rows[np.arange(rows.shape[0]), np.flatnonzero(has)] = 1.0 / prior_sd[has]
+    A = np.vstack([J / sigma, rows])
+    b = np.concatenate([-r / sigma, -(theta[has] - prior_mean[has]) / prior_sd[has]])
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    step, *_ = np.linalg.lstsq(A / scale, b, rcond=1e-10)
+    return step / scale
+
+
 def _inside(vector: ParameterVector, theta: np.ndarray, candidate: slice) -> np.ndarray:
     """``theta`` clipped to the bounds; a candidate's bounded scalars (absorption >= 0) start 5 %
     of its largest estimate inside, where the optimiser's transform still has a usable slope."""
@@ -172,12 +211,10 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
             m, p = Jc.shape
             sigma2 = float(np.sum((r - full) ** 2)) / max(m - p, 1)
             statistic = (float(full @ full) - float(nuisance @ nuisance)) / max(sigma2, 1e-300)
-            scale = np.linalg.norm(Jc, axis=0)
-            scale[scale == 0] = 1.0
-            step, *_ = np.linalg.lstsq(Jc / scale, -r, rcond=1e-10)
             sub = ParameterVector.build(compiled.specs, tuple(base_parameters) + c.parameters,
                                         {n: compiled.get(n) for n in names})
-            start = _inside(sub, theta0[cols] + step / scale, slice(base.size, cols.size))
+            step = _step(Jc, r, sigma2, theta0[cols], *_priors(scene, sub))
+            start = _inside(sub, theta0[cols] + step, slice(base.size, cols.size))
             scores[c] = CandidateScore(c, max(statistic, 0.0), own.size, m, "score test",
                                        sub.split(start))
     return [scores[c] for c in candidates]

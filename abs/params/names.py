@@ -1,7 +1,8 @@
 """The catalogue of a scene's differentiable parameters.
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
-``environment.rotation``, ``environment.inverse_distance``, ``sensor.<field>``, ``<object>.pose``.
+``environment.rotation``, ``environment.orientation``, ``environment.inverse_distance``,
+``sensor.<field>``, ``<object>.pose``.
 Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
 bounds to unconstrained variables.
 
@@ -107,7 +108,14 @@ class Parameter:
 
 
 def _null(value, size: int) -> np.ndarray | None:
-    return None if value is None else np.full(size, float(value))
+    """``size`` entries from one number for all of them, or from ``size`` numbers."""
+    return None if value is None else np.broadcast_to(np.asarray(value, np.float64), (size,)).copy()
+
+
+#: Conditioning steps of sensor fields that the default (by unit and bound) would misjudge: a
+#: colour matrix's diagonal sits at 1, its off-diagonal at 0, yet a change of 0.05 in any entry
+#: is a 5 % change of a channel.
+_SENSOR_STEPS = {"colour_matrix": 0.05}
 
 
 def parameter_specs(scene) -> dict[str, Parameter]:
@@ -124,13 +132,20 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         "environment.inverse_distance": Parameter(
             "environment.inverse_distance", 1, "1/m", 0.0, INF, np.array([env.inverse_distance]),
             null=np.zeros(1), setter=AttributeSetter("environment", "inverse_distance")),
+        # A rotation vector turning the map about all three axes; zeros: the orientation the
+        # scene file gives. Lookups move, light paths do not (like ``rotation``).
+        "environment.orientation": Parameter(
+            "environment.orientation", 3, "rad, rad, rad", -INF, INF,
+            np.asarray(env.orientation, np.float64), null=np.zeros(3),
+            setter=AttributeSetter("environment", "orientation")),
     }
     for field_name, (size, unit, lower, upper, null) in type(scene.sensor).FIELDS.items():
         # A response exponent and a stray-light level per channel act on their channel alone.
         specs[f"sensor.{field_name}"] = Parameter(
             f"sensor.{field_name}", size, unit, lower, upper,
             np.asarray(getattr(scene.sensor, field_name), np.float64),
-            separable_channels=field_name in ("response", "stray_light"), reweighting="after_paths",
+            separable_channels=field_name in ("response", "stray_light"),
+            typical_step=_SENSOR_STEPS.get(field_name), reweighting="after_paths",
             null=_null(null, size), setter=AttributeSetter("sensor", field_name))
     for name, material in scene.materials.items():
         for field_name, spec in material.parameters().items():

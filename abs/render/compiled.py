@@ -28,6 +28,7 @@ from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import from_numpy, opaque
 from abs.render.path_lengths import LengthBins, PathLengthRecording, length_bins, reweight
+from abs.render.rotation import rotation_matrix
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
 
@@ -42,18 +43,6 @@ MAX_SAMPLES_IN_FLIGHT = 1 << 21
 # The computation lives here, in the renderer bridge, because abs.scene (where the materials are)
 # sits below abs.render and must not import it (docs/architecture.md).
 _DRJIT_BINDINGS = {"brdf_pca": bind_coefficients}
-
-
-def rotation_matrix(r) -> mi.Matrix3f:
-    """Rotation matrix of a rotation vector ``r`` (axis * angle, radians); differentiable at 0."""
-    theta2 = dr.squared_norm(r)
-    theta = dr.sqrt(theta2 + 1e-24)
-    small = theta2 < 1e-8
-    a = dr.select(small, 1.0 - theta2 / 6.0, dr.sin(theta) / theta)
-    b = dr.select(small, 0.5 - theta2 / 24.0, (1.0 - dr.cos(theta)) / dr.square(theta))
-    x, y, z = r.x, r.y, r.z
-    k = mi.Matrix3f(0.0, -z, y, z, 0.0, -x, -y, x, 0.0)
-    return mi.Matrix3f(1.0) + a * k + b * (k @ k)
 
 
 def _mesh_dict(obj) -> dict:
@@ -87,8 +76,9 @@ class CompiledScene:
         self.shape_ids: dict[str, str] = shape_ids(scene)
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
-                                       spec.inverse_distance, spec.center)
-        self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light)
+                                       spec.inverse_distance, spec.center, spec.orientation)
+        self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
+                             scene.sensor.colour_matrix)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}
@@ -260,8 +250,8 @@ class CompiledScene:
         """Render ``camera``'s view at the scene's ``[render]`` settings unless overridden.
 
         Returns a ``TensorXf`` of shape ``(height, width, 3)``: the radiance as the sensor records
-        it (``[sensor]``: vignetting, stray light, response; linear RGB radiance when those are at
-        their null values), attached to the AD graph of every parameter set with gradients enabled
+        it (``[sensor]``: vignetting, stray light, colour matrix, response; linear RGB radiance
+        when those are at their null values), attached to the AD graph of every parameter set with gradients enabled
         (then ``dr.backward`` and ``dr.forward_to`` work on it; for one directional derivative,
         :meth:`render_forward` is faster and needs far less memory).
         """

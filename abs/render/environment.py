@@ -3,7 +3,12 @@
 Why not evaluate Mitsuba's ``envmap`` directly: its ``to_world`` rotation is not differentiable.
 Here the map is looked up with our own bilinear interpolation (matching Mitsuba's ``envmap`` value
 for value, see ``tests/test_environment.py``), after rotating the query direction by an attached
-rotation about the world +y axis, so gradients reach ``scale``, ``rotation`` and the pixel data.
+rotation about the world +y axis (``rotation``) and an attached rotation vector about all three
+axes (``orientation``, applied last: ``R(orientation) R_y(rotation) to_world``), so gradients
+reach ``scale``, ``rotation``, ``orientation`` and the pixel data. At ``orientation = 0`` its
+matrix is the identity exactly (:func:`~abs.render.rotation.rotation_matrix`), and multiplying
+by it changes no bit (``1 m + 0 m' + 0 m''`` is ``m`` for finite entries), so the map is looked
+up exactly as without it.
 
 Importance sampling draws a pixel with probability proportional to its luminance times the solid
 angle it covers, then a uniform point inside it. Sampling is detached from the parameters (the
@@ -32,7 +37,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from abs.render.jit import from_numpy
+from abs.render.jit import from_numpy, opaque
+from abs.render.rotation import rotation_matrix
 
 __all__ = ["Environment"]
 
@@ -40,6 +46,15 @@ __all__ = ["Environment"]
 def _rotation_y(angle) -> mi.Matrix3f:
     c, s = dr.cos(angle), dr.sin(angle)
     return mi.Matrix3f(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c)
+
+
+def _rotation_np(r: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation matrix of rotation vector ``r`` (radians), in numpy."""
+    theta = float(np.linalg.norm(r))
+    if theta == 0.0:
+        return np.eye(3)
+    k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]]) / theta
+    return np.eye(3) + np.sin(theta) * k + (1.0 - np.cos(theta)) * (k @ k)
 
 
 class Environment:
@@ -59,10 +74,14 @@ class Environment:
         1 / radius of the map's sphere in 1/m (``environment.inverse_distance``; 0: at infinity).
     center : array-like, shape (3,)
         Centre of that sphere, world metres.
+    orientation : array-like, shape (3,)
+        Rotation vector (axis times angle, radians, world frame) applied after ``rotation``
+        (``environment.orientation``; zeros: none).
     """
 
     def __init__(self, rgb: np.ndarray, scale: float = 1.0, to_world: np.ndarray | None = None,
-                 rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0)):
+                 rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0),
+                 orientation=(0.0, 0.0, 0.0)):
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
         self.data = mi.TensorXf(from_numpy(mi.Float, rgb), rgb.shape)
@@ -70,6 +89,7 @@ class Environment:
         self.scale = dr.opaque(mi.Float, scale)
         self.rotation = dr.opaque(mi.Float, rotation)
         self.inverse_distance = dr.opaque(mi.Float, inverse_distance)
+        self.orientation = opaque(mi.Float, np.asarray(orientation, np.float32).ravel())
         self.center = mi.Point3f(*[float(c) for c in center])
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m
@@ -79,7 +99,9 @@ class Environment:
     # ------------------------------------------------------------------ frames
     def _to_world(self, detach: bool = False) -> mi.Matrix3f:
         rotation = dr.detach(self.rotation) if detach else self.rotation
-        return _rotation_y(rotation) @ self._base
+        r = dr.detach(self.orientation) if detach else self.orientation
+        vector = mi.Vector3f(*(dr.gather(mi.Float, r, mi.UInt32(i)) for i in range(3)))
+        return rotation_matrix(vector) @ (_rotation_y(rotation) @ self._base)
 
     def to_local(self, d: mi.Vector3f, detach: bool = False) -> mi.Vector3f:
         return self._to_world(detach).T @ d
@@ -184,5 +206,6 @@ class Environment:
         r = float(dr.detach(self.rotation)[0]) if dr.width(self.rotation) else 0.0
         c, s = np.cos(r), np.sin(r)
         rot = np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1]])
+        rot[:3, :3] = _rotation_np(np.asarray(dr.detach(self.orientation), np.float64)) @ rot[:3, :3]
         return {"type": "envmap", "bitmap": mi.Bitmap(np.asarray(self.data.numpy(), np.float32)),
                 "scale": float(self.scale[0]), "to_world": mi.ScalarTransform4f(rot @ m)}

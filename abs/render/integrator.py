@@ -218,8 +218,8 @@ class PathTracer:
         is the loop state's; the cost is about two primal renders.
 
         Only derivatives that stay at their vertex are exact: BSDF and emitter values (textures,
-        reflectance, measured-BRDF tables), absorption, the environment's scale, rotation and
-        distance, subsurface spread. The replayed paths are detached, so parameters that move
+        reflectance, measured-BRDF tables), absorption, the environment's scale, rotation,
+        orientation and distance, subsurface spread. The replayed paths are detached, so parameters that move
         paths (IOR, roughness, pose: ``Parameter.moves_paths``) need :meth:`render_forward`.
         """
         split = self._split(scene, dispersion)
@@ -324,7 +324,7 @@ class PathTracer:
 
     def _attached(self, scene: mi.Scene, env: Environment) -> bool:
         """Whether any input of a render has gradients enabled (and they are not suspended)."""
-        values = [env.scale, env.rotation, env.inverse_distance, env.data]
+        values = [env.scale, env.rotation, env.orientation, env.inverse_distance, env.data]
         values += [value for _, value in self.subsurface]
         params = mi.traverse(scene)
         values += [params[k] for k in params.keys()]

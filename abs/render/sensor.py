@@ -1,21 +1,30 @@
-"""The camera sensor applied to rendered radiance: vignetting, stray light and a non-linear response.
+"""The camera sensor applied to rendered radiance: vignetting, stray light, a colour matrix and a
+non-linear response.
 
 Applied to every rendering after the path tracer (in :meth:`CompiledScene.render`), in Dr.Jit, so
 images stay differentiable with respect to the sensor's parameters and to everything upstream.
 The order follows the light: the lens attenuates the image towards its corners (vignetting),
-light scattered inside the lens adds a veil (stray light), then the sensor converts irradiance to
-values (response)::
+light scattered inside the lens adds a veil (stray light), the sensor's colour filters mix the
+channels of what reaches it (colour matrix), then the sensor converts each channel's irradiance
+to values (response)::
 
-    out = (V(r) * L + s) ** gamma,     V(r) = 1 + k1 r^2 + k2 r^4
+    out_c = (sum_j M_cj (V(r) L_j + s_j)) ** gamma_c,     V(r) = 1 + k1 r^2 + k2 r^4
 
 with ``r`` the distance of the point on the image plane from the principal point in units of the
-focal length (OpenCV normalised coordinates). Every operation is exact at its null value
-(``k = 0``: ``L * 1``; ``s = 0``: ``+ 0``; ``gamma = 1``: ``x * exp(0)``), so a sensor at its null
-values returns the rendering bit for bit.
+focal length (OpenCV normalised coordinates) and ``M`` the 3x3 colour matrix (rendering RGB to
+photograph RGB). The colour matrix sits **before** the response: a camera mixes colours in its
+linear signal (filter cross-talk, white balance, its colour-correction matrix), and any tone
+curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
+
+Every operation is exact at its null value (``k = 0``: ``L * 1``; ``s = 0``: ``+ 0``;
+``M = I``: ``1 x_c + 0 x_j + 0 x_k``, where the products with 0 are +-0 and adding them to
+``x_c`` leaves it unchanged for any finite ``x``; ``gamma = 1``: ``x * exp(0)``), so a sensor at
+its null values returns the rendering bit for bit.
 
 Downsampled cameras (``Camera.block > 1``) compare box averages of fine photograph pixels, each
 vignetted at its own centre; the falloff is linear in ``k``, so the block average of ``r^2`` and
-``r^4`` over the fine pixel centres gives exactly that average.
+``r^4`` over the fine pixel centres gives exactly that average. The colour matrix is linear too,
+so it commutes with the block average.
 """
 
 from __future__ import annotations
@@ -75,12 +84,17 @@ class Sensor:
         Exponent per R, G, B.
     stray_light : array-like, shape (3,)
         Offset per R, G, B in radiance units.
+    colour_matrix : array-like, shape (9,), optional
+        The 3x3 matrix from rendering RGB to photograph RGB, row-major (dimensionless); the
+        identity when left out.
     """
 
-    def __init__(self, vignetting, response, stray_light):
+    def __init__(self, vignetting, response, stray_light, colour_matrix=None):
         self.vignetting = opaque(mi.Float, np.asarray(vignetting, np.float32))
         self.response = opaque(mi.Float, np.asarray(response, np.float32))
         self.stray_light = opaque(mi.Float, np.asarray(stray_light, np.float32))
+        matrix = np.eye(3).ravel() if colour_matrix is None else colour_matrix
+        self.colour_matrix = opaque(mi.Float, np.asarray(matrix, np.float32).ravel())
 
     def apply(self, image: mi.TensorXf, camera: Camera) -> mi.TensorXf:
         """The sensor's output for rendered radiance ``image`` (height, width, 3) of ``camera``."""
@@ -94,9 +108,23 @@ class Sensor:
         k1 = dr.gather(mi.Float, self.vignetting, mi.UInt32(0))
         k2 = dr.gather(mi.Float, self.vignetting, mi.UInt32(1))
         veiled = flat * (1.0 + k1 * r2 + k2 * r4) + dr.gather(mi.Float, self.stray_light, channel)
+        mixed = self._mix(veiled, channel)
         gamma = dr.gather(mi.Float, self.response, channel)
         # x ** gamma written as x * x ** (gamma - 1): exactly x at gamma = 1, with the derivative
         # x log x there, and no NaN at x = 0.
-        log_x = dr.log(dr.maximum(veiled, _TINY))
-        out = veiled * dr.exp((gamma - 1.0) * log_x)
+        log_x = dr.log(dr.maximum(mixed, _TINY))
+        out = mixed * dr.exp((gamma - 1.0) * log_x)
         return mi.TensorXf(out, (h, w, 3))
+
+    def _mix(self, flat: mi.Float, channel: mi.UInt32) -> mi.Float:
+        """``sum_j M_cj x_j`` for every (pixel, channel ``c``) lane of the (H, W, 3) image
+        ``flat``."""
+        base = dr.arange(mi.UInt32, dr.width(flat)) - channel  # the lane of the pixel's R
+        out = None
+        for j in range(3):
+            # Sum of M_c0 x_0 + M_c1 x_1 + M_c2 x_2 in a fixed order: at M = I each product off
+            # the diagonal is +-0 and the diagonal one is x_c itself, so the sum is x_c exactly.
+            m = dr.gather(mi.Float, self.colour_matrix, 3 * channel + j)
+            term = m * dr.gather(mi.Float, flat, base + j)
+            out = term if out is None else out + term
+        return out

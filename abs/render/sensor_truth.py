@@ -10,7 +10,10 @@ form (numpy, applied to a rendered radiance image of a :class:`~abs.render.camer
 - :func:`veiling_glare`: light scattered in the lens, a wide Gaussian blur of the image itself
   (bright regions glow more), plus a uniform floor;
 - :func:`filmic_response`: a saturating response ``x (1 + x / w^2) / (1 + x)`` (Reinhard's
-  extended operator), not a power law.
+  extended operator), not a power law;
+- :func:`white_balance_shift`: the colours of a scene lit by another illuminant, by Bradford
+  chromatic adaptation in XYZ (colour-science), which abs fits as a 3x3 colour matrix of linear
+  RGB without knowing it is one.
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ import numpy as np
 
 from abs.render.sensor import radial_moments
 
-__all__ = ["natural_vignetting", "veiling_glare", "filmic_response"]
+__all__ = ["natural_vignetting", "veiling_glare", "filmic_response", "white_balance_matrix",
+           "white_balance_shift"]
 
 
 def natural_vignetting(image: np.ndarray, camera, strength: float = 1.0) -> np.ndarray:
@@ -51,3 +55,24 @@ def filmic_response(image: np.ndarray, white: float = 2.0) -> np.ndarray:
     the radiance that maps to 1)."""
     x = np.maximum(np.asarray(image, np.float64), 0.0)
     return (x * (1.0 + x / white ** 2) / (1.0 + x)).astype(np.float32)
+
+
+def white_balance_matrix(cct: float) -> np.ndarray:
+    """The 3x3 matrix on linear sRGB (the project's image convention) that Bradford-adapts
+    colours from the rendering's white (D65) to the white of a Planckian-locus illuminant of
+    ``cct`` kelvin: a white balance set for D65 while the light was ``cct`` (a warm cast below
+    6504 K, a cold one above). Computed by colour-science, independently of abs's sensor."""
+    import colour
+
+    space = colour.RGB_COLOURSPACES["sRGB"]
+    adapt = colour.adaptation.matrix_chromatic_adaptation_VonKries(
+        colour.xy_to_XYZ(space.whitepoint), colour.xy_to_XYZ(colour.temperature.CCT_to_xy(cct)),
+        "Bradford")
+    return np.asarray(space.matrix_XYZ_to_RGB @ adapt @ space.matrix_RGB_to_XYZ, np.float64)
+
+
+def white_balance_shift(image: np.ndarray, cct: float) -> np.ndarray:
+    """``image`` (linear sRGB, (H, W, 3)) as photographed under a ``cct`` kelvin white balance
+    error (:func:`white_balance_matrix`): a colour shift over the whole image."""
+    m = white_balance_matrix(cct)
+    return np.einsum("ij,hwj->hwi", m, np.asarray(image, np.float64)).astype(np.float32)

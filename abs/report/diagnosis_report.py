@@ -89,6 +89,28 @@ def _trials_table(rounds) -> str:
                    "delta BIC", "accepted", "why"], rows)
 
 
+def _compensation_table(findings) -> str:
+    """Per finding, how the parameters fitted before its effect moved when it was added, in
+    their standard errors (:mod:`abs.diagnosis.compensation`); flagged ones say so."""
+    rows = []
+    for f in findings:
+        for s in f.compensation:
+            z = s.in_stderr
+            rows.append([escape(f.candidate.label), escape(s.parameter),
+                         escape(", ".join(format_number(x) for x in s.before)),
+                         escape(", ".join(format_number(x) for x in s.after)),
+                         escape(", ".join(format_number(x) for x in s.stderr)),
+                         escape(", ".join(format_number(x, "+.1f") for x in z)),
+                         "<b>yes: compensating</b>" if s.compensating else "no"])
+    if not rows:
+        return ""
+    return ("<p>How the parameters fitted without each effect moved when it was added, in the "
+            "standard errors of the fit without it; a move beyond one standard error means the "
+            "parameter was making up for the missing effect.</p>"
+            + html_table(["finding", "parameter", "without the effect", "with it",
+                          "standard error (without)", "move (standard errors)", "> 1 s.e."], rows))
+
+
 def write_diagnosis_report(folder: str | Path, diagnosis) -> Path:
     """Write ``report.html`` and its PNGs into ``folder``; returns the HTML path."""
     folder = Path(folder)
@@ -98,6 +120,7 @@ def write_diagnosis_report(folder: str | Path, diagnosis) -> Path:
                     f"{escape(f.explanation)}</li>" for f in diagnosis.findings)
     sections = [html.section("Verdict", f"<p>{'Missing: ' + escape(', '.join(verdict)) if verdict else 'Nothing missing: no effect of the catalogue improves the holdout views beyond noise.'}</p>"
                              + (f"<ul>{items}</ul>" if items else "")
+                             + _compensation_table(diagnosis.findings)
                              + "".join(f"<p>{escape(n)}</p>" for n in diagnosis.notes))]
 
     final, base = diagnosis.final, diagnosis.baseline

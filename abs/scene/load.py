@@ -65,7 +65,8 @@ def load_scene(path: str | Path) -> Scene:
     )
 
     env_fields = root.sub("environment")
-    env_fields.check_known({"file", "scale", "to_world", "rotation", "inverse_distance", "center"})
+    env_fields.check_known({"file", "scale", "to_world", "rotation", "inverse_distance", "center",
+                            "orientation"})
     environment = EnvironmentSpec(
         file=env_fields.file("file", suffixes=_IMAGE_SUFFIXES),
         scale=env_fields.number("scale", 1.0, lower=0.0),
@@ -73,6 +74,8 @@ def load_scene(path: str | Path) -> Scene:
         rotation=env_fields.number("rotation", 0.0),
         inverse_distance=env_fields.number("inverse_distance", 0.0, lower=0.0),
         center=env_fields.array("center", (3,), default=[0.0, 0.0, 0.0]),
+        # Three numbers, never one for all: a rotation vector [a, a, a] is no natural shorthand.
+        orientation=env_fields.array("orientation", (3,), default=[0.0, 0.0, 0.0]),
     )
     sensor = _sensor(root.sub("sensor", required=False) or Fields({}, source, "sensor"))
 
@@ -146,9 +149,27 @@ def _pose_field(fields: Fields, name: str) -> SceneError:
 def _sensor(fields: Fields) -> SensorSpec:
     """``[sensor]``: every field optional, each defaulting to its null value."""
     fields.check_known(set(SensorSpec.FIELDS))
-    values = {key: fields.vector(key, size, default=null, lower=lower, upper=upper)
-              for key, (size, _, lower, upper, null) in SensorSpec.FIELDS.items()}
-    return SensorSpec(**values)
+    values = {key: fields.vector(key, size, default=SensorSpec.null(key), lower=lower, upper=upper)
+              for key, (size, _, lower, upper, _) in SensorSpec.FIELDS.items()
+              if key != "colour_matrix"}
+    return SensorSpec(**values, colour_matrix=_colour_matrix(fields))
+
+
+def _colour_matrix(fields: Fields) -> np.ndarray:
+    """``[sensor] colour_matrix``: 9 numbers row-major, or 3 rows of 3 (identity when absent).
+
+    One number is not accepted (unlike the per-channel fields): ``colour_matrix = 1`` would
+    read as the identity but mean a matrix of ones. Any finite matrix is valid (every value
+    inside a parameter's bounds must load, so that fitted values can always be written back).
+    """
+    key = "colour_matrix"
+    if not fields.has(key):
+        return SensorSpec.null(key)
+    value = fields.raw(key)
+    nested = isinstance(value, list) and len(value) == 3 and all(isinstance(v, list) for v in value)
+    if not isinstance(value, list) or (len(value) != 9 and not nested):
+        raise fields.error(key, f"expected 9 numbers (row-major) or 3 rows of 3 numbers, got {value!r}")
+    return (fields.array(key, (3, 3)) if nested else fields.array(key, (9,))).ravel()
 
 
 def _fit_parameters(fit_fields: Fields, known: dict) -> tuple[str, ...]:

@@ -28,9 +28,11 @@ class RenderSettings:
 class EnvironmentSpec:
     """``[environment]``: a lat-long HDR map, at infinity unless ``inverse_distance`` > 0.
 
-    ``rotation`` (radians, about world +y) is applied after ``to_world``. With
-    ``inverse_distance`` = 1/R > 0 (1/m) the map lies on a sphere of radius R metres around
-    ``center`` (world, metres), and light from it shows parallax.
+    ``rotation`` (radians, about world +y) is applied after ``to_world``, and ``orientation``
+    after both: a correction of the map's orientation about all three axes, a rotation vector
+    (axis times angle, radians, world frame; zeros: none). With ``inverse_distance`` = 1/R > 0
+    (1/m) the map lies on a sphere of radius R metres around ``center`` (world, metres), and
+    light from it shows parallax.
     """
 
     file: Path
@@ -39,6 +41,7 @@ class EnvironmentSpec:
     rotation: float = 0.0
     inverse_distance: float = 0.0
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)
@@ -56,18 +59,33 @@ class SensorSpec:
         Per-channel exponent ``gamma`` of the sensor response ``out = in ** gamma`` (1 = linear).
     stray_light : ndarray, shape (3,)
         Veiling glare / ambient offset added to every pixel, per R, G, B, in radiance units.
+    colour_matrix : ndarray, shape (9,)
+        The 3x3 matrix ``M``, row-major, that takes the rendering's linear RGB to the
+        photographs' (``out_i = sum_j M_ij in_j``, dimensionless); the identity is no colour
+        transform. Applied after vignetting and stray light, before the response.
     """
 
-    # field: (size, unit, lower, upper, null value); the loader and the parameter catalogue read it.
+    # field: (size, unit, lower, upper, null value: one number for every entry, or ``size``
+    # numbers); the loader and the parameter catalogue read it.
     FIELDS = {
         "vignetting": (2, "1", -2.0, 2.0, 0.0),
         "response": (3, "1", 0.2, 5.0, 1.0),
         "stray_light": (3, "radiance", 0.0, float("inf"), 0.0),
+        # A real camera's colour matrix can have negative entries (cross-talk correction), so
+        # no entry is bounded.
+        "colour_matrix": (9, "1", -float("inf"), float("inf"), tuple(np.eye(3).ravel())),
     }
 
     vignetting: np.ndarray = field(default_factory=lambda: np.zeros(2))
     response: np.ndarray = field(default_factory=lambda: np.ones(3))
     stray_light: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    colour_matrix: np.ndarray = field(default_factory=lambda: np.eye(3).ravel())
+
+    @staticmethod
+    def null(name: str) -> np.ndarray:
+        """The null value of field ``name``, one entry per scalar."""
+        size, _, _, _, null = SensorSpec.FIELDS[name]
+        return np.broadcast_to(np.asarray(null, np.float64), (size,)).copy()
 
 
 @dataclass(frozen=True)

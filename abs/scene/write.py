@@ -131,8 +131,12 @@ def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     environment["inverse_distance"] = values.get("environment.inverse_distance",
                                                  float(env.inverse_distance))
     environment["center"] = np.asarray(env.center, np.float64).tolist()
+    environment["orientation"] = values.get("environment.orientation",
+                                            np.asarray(env.orientation, np.float64).tolist())
     sensor = {key: values.get(f"sensor.{key}", np.asarray(getattr(scene.sensor, key), np.float64).tolist())
               for key in type(scene.sensor).FIELDS}
+    # Three rows of three read as the matrix they are (the loader takes either form).
+    sensor["colour_matrix"] = np.asarray(sensor["colour_matrix"], np.float64).reshape(3, 3).tolist()
 
     objects = []
     for obj in scene.objects:

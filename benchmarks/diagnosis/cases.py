@@ -72,6 +72,39 @@ def _filmic_response(compiled, camera, spp, seed, white):
     return filmic_response(_model(compiled, camera, spp, seed), white)
 
 
+def _white_balance_shift(compiled, camera, spp, seed, cct):
+    from abs.render.sensor_truth import white_balance_shift
+
+    return white_balance_shift(_model(compiled, camera, spp, seed), cct)
+
+
+def _turned_environment(compiled, camera, spp, seed, rotation_vector):
+    """The scene under its environment map turned by ``rotation_vector`` (radians, world frame),
+    through the map's fixed ``to_world`` frame (scipy's rotation), not abs's fitted
+    ``orientation``."""
+    import numpy as np
+    from scipy.spatial.transform import Rotation
+
+    from abs.render.environment import Environment
+
+    env = compiled.environment
+    turn = np.eye(4)
+    turn[:3, :3] = Rotation.from_rotvec(rotation_vector).as_matrix()
+    # ``rotation`` (about +y) applies after ``to_world``; turning the whole frame means
+    # R_turn R_y to_world = R_y (R_y^-1 R_turn R_y) to_world.
+    r = float(np.asarray(env.rotation)[0])
+    ry = np.eye(4)
+    ry[:3, :3] = Rotation.from_rotvec([0.0, r, 0.0]).as_matrix()
+    turned = Environment(np.asarray(env.data.numpy()), float(np.asarray(env.scale)[0]),
+                         np.linalg.inv(ry) @ turn @ ry @ env.to_world_np, r,
+                         float(np.asarray(env.inverse_distance)[0]), np.asarray(env.center).ravel())
+    compiled.environment = turned
+    try:
+        return _model(compiled, camera, spp, seed)
+    finally:
+        compiled.environment = env
+
+
 def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
     from abs.render.medium_truth import render_with_medium
 
@@ -84,6 +117,8 @@ TRUTH_RENDERERS = {
     "veiling_glare": _veiling_glare,             # blurred image + floor, not a constant offset
     "filmic_response": _filmic_response,         # Reinhard curve, not a power law
     "scattering_cloth": _scattering_cloth,       # volumetric slab in volpath, not a spread exit point
+    "white_balance_shift": _white_balance_shift,  # Bradford adaptation in XYZ (colour-science)
+    "turned_environment": _turned_environment,   # the map's to_world turned, not its orientation
 }
 
 
@@ -110,6 +145,14 @@ CASES = [
          photographs=("filmic_response", {"white": 3.0})),
     Case("box-vignetting", "box", ("vignetting",), photographs=("natural_vignetting", {"strength": 0.6})),
     Case("box-null", "box", ()),
+    # A 5500 K white balance error: red up 4 %, blue down 16 %, some green into red.
+    Case("sphere-colour_transform", "sphere", ("colour_transform",),
+         photographs=("white_balance_shift", {"cct": 5500})),
+    Case("box-colour_transform", "box", ("colour_transform",),
+         photographs=("white_balance_shift", {"cct": 5500})),
+    # The map tilted by 8 degrees about x and 5 about z: highlights and refractions misplaced.
+    Case("sphere-environment_rotation", "sphere", ("environment_rotation",),
+         photographs=("turned_environment", {"rotation_vector": [0.14, 0.0, 0.09]})),
     Case("box-absorption+stray_light", "box", ("absorption", "stray_light"),
          {"glass.absorption": [3.0, 6.0, 10.0]},
          ("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
@@ -118,7 +161,9 @@ CASES = [
 #: The quick default: every effect once, a two-effect case and both nulls.
 QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
-         "box-pose", "box-camera_response", "sphere-null", "box-null", "sphere-absorption+vignetting"]
+         "box-pose", "box-camera_response", "sphere-colour_transform",
+         "sphere-environment_rotation", "sphere-null", "box-null",
+         "sphere-absorption+vignetting"]
 
 
 def _conftest() -> None:

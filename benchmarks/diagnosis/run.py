@@ -79,6 +79,10 @@ def run_case(case, root: Path, args) -> dict:
             "accepted_holdout": [[f["effect"], f["holdout_rmse_before"], f["holdout_rmse_after"]]
                                  for f in out["findings"]],
             "truth": case.truth, "truth_renderer": case.describe_truth(), "recovered": recovered,
+            # Per accepted effect, the baseline parameters it showed compensating (moved by more
+            # than their standard error when it was added; abs.diagnosis.compensation).
+            "compensating": {f["effect"]: [c["parameter"] for c in f["compensation"] if c["compensating"]]
+                             for f in out["findings"]},
             "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
 
 

@@ -24,13 +24,9 @@ class SensorField(Effect):
         return ["sensor"] if missing(scene, compiled.specs, self.parameter) else []
 
     def add(self, data: dict, target: str) -> None:
-        size, _, _, _, null = self._spec()
-        data.setdefault("sensor", {})[self.field] = [float(null)] * size
-
-    def _spec(self):
         from abs.scene.scene import SensorSpec
 
-        return SensorSpec.FIELDS[self.field]
+        data.setdefault("sensor", {})[self.field] = SensorSpec.null(self.field).tolist()
 
     def parameters(self, target: str) -> tuple[str, ...]:
         return (self.parameter,)
