@@ -58,7 +58,9 @@ def test_true_absorption_lies_within_the_posterior(glass_scene_dir, capture, tmp
     assert np.all(np.array(s["q95"]) - np.array(s["q05"]) < truth), s
     # ... and the noise model explains the residuals at the fit (chi^2 per residual near 1).
     assert 0.5 < result.reduced_chi2 < 2.0
-    assert result.renders > 30 * 8 * 2 and len(result.predictive) == 2
+    # Absorption reweights from path-length recordings: the chain's 240 evaluations render
+    # nothing; the renders are the noise model's, the calibration's and the predictive draws'.
+    assert result.renders < 60 and len(result.predictive) == 2
     # The minutes before the first chain step are reported, in order (the fit was given).
     assert stages == ["noise model at the starting point", "mode of the likelihood",
                       "noise model at the mode", "render-noise calibration (8 seed pairs)", "chain",
@@ -101,7 +103,9 @@ def test_cli_writes_the_contract_files_and_resumes(glass_scene_dir, capture, fit
     assert all(len(entry[k]) == 1 for k in ("mean", "sd", "q05", "q95", "ess"))
     assert entry["q05"][0] < entry["mean"][0] < entry["q95"][0] and entry["sd"][0] > 0
     assert summary["steps"] == 4 and summary["walkers"] == 8 and summary["stop_reason"] == "max_steps"
-    assert 0 < summary["acceptance_fraction"] <= 1 and summary["renders"] >= 5 * 8 * 2
+    # The environment scale reweights path-length recordings: the resumed run renders its two
+    # seeds' recordings and the predictive draws, not 2 per evaluation.
+    assert 0 < summary["acceptance_fraction"] <= 1 and 0 < summary["renders"] < 2 * 8 * 2
     assert {"tau", "r_hat", "wall_s", "noise", "burn_in"} <= set(summary)
     # Four steps cannot meet emcee's rule: the run says so, in the file and at the report's top.
     assert any("--resume" in c for c in summary["checks"])

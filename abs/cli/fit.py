@@ -32,7 +32,8 @@ def add_parser(sub) -> None:
                    help="clamp renderings at this value (photographs that saturate, e.g. 1.0)")
     p.add_argument("--max-iterations", type=int, default=20)
     p.add_argument("--refinement-steps", type=int, default=4,
-                   help="Gauss-Newton steps on independent renders after Levenberg-Marquardt")
+                   help="Gauss-Newton steps on independent renders after Levenberg-Marquardt "
+                        "(from path-length recordings: further independent seed pairs)")
     p.add_argument("--learning-rate", type=float, default=0.05, help="Adam step (typical steps)")
     p.add_argument("--spp-schedule", default="", help="Adam: ITER:SPP,... e.g. 0:4,20:16")
     p.add_argument("--downsample-schedule", default="", help="coarse to fine, Adam and LM: ITER:FACTOR,... e.g. 0:4,10:2,20:1")
@@ -42,6 +43,9 @@ def add_parser(sub) -> None:
     p.add_argument("--tie", action="append", default=[], metavar="NAME",
                    help="fit this per-channel parameter as one value for all channels "
                         "(e.g. glass.ior when the photographs do not resolve dispersion); repeatable")
+    p.add_argument("--no-reweight", action="store_true",
+                   help="render every evaluation, even when all fitted parameters reweight from "
+                        "path-length recordings (absorption, environment scale, sensor)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -77,7 +81,7 @@ def run(args) -> int:
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
-        seed=args.seed, tie=tuple(args.tie))
+        seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

@@ -32,6 +32,9 @@ def add_parser(sub) -> None:
                    help="further seed pairs at the mode that recentre the likelihood and "
                         "calibrate its render variance (0: off)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-reweight", action="store_true",
+                   help="render the likelihood at every evaluation, even when every sampled "
+                        "parameter reweights from path-length recordings")
     p.add_argument("--resume", action="store_true", help="continue the chain in OUT/chain.h5")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -72,7 +75,8 @@ def run(args) -> int:
                               walkers=args.walkers, max_steps=args.max_steps,
                               max_renders=args.max_renders, predictive_draws=args.draws,
                               eval_spp=args.eval_spp, seed=args.seed,
-                              calibration_pairs=args.calibration_pairs)
+                              calibration_pairs=args.calibration_pairs,
+                              reweight=not args.no_reweight)
     if args.workers < 1:
         raise InputError(None, "--workers", f"must be >= 1, got {args.workers}")
     scene = load_scene(args.scene)

@@ -16,6 +16,9 @@ def add_parser(sub) -> None:
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--downsample", type=int, default=2, help="compare images reduced by this factor")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-reweight", action="store_true",
+                   help="render every grid point (the seeds' way) rather than reweighting one "
+                        "path-length recording per view (absorption, environment scale)")
     p.set_defaults(run=run)
 
 
@@ -37,7 +40,8 @@ def run(args) -> int:
         grid = np.linspace(lo, hi, args.points)
     bar = tqdm(desc="scan", unit="point")
     result = scan(args.scene, args.capture, args.param, grid=grid, points=args.points, spp=args.spp,
-                  downsample=args.downsample, seed=args.seed, on_point=lambda: bar.update(1))
+                  downsample=args.downsample, seed=args.seed, on_point=lambda: bar.update(1),
+                  reweight=not args.no_reweight)
     bar.close()
     summary = result.summary()
     write_json(args.out / "scan.json", summary)

@@ -21,6 +21,7 @@ from abs.fitting.checks import run_checks
 from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
 from abs.fitting.objective import Objective
 from abs.fitting.optimisers import OptimizerState, get
+from abs.fitting.scan import channel_curves, default_grid, parabola_minimum
 from abs.fitting.settings import FitSettings
 from abs.metrics import ssim
 from abs.model import ParameterVector, build_model, estimate_image_noise, render_views
@@ -59,6 +60,7 @@ class FitResult:
     truth: dict[str, list] | None = None
     image_noise: float | None = None
     checks: list[str] = field(default_factory=list)
+    scan: dict | None = None
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -86,6 +88,7 @@ class FitResult:
             "method": self.method,
             "image_noise": self.image_noise,
             "checks": list(self.checks),
+            **({"scan": self.scan} if self.scan else {}),
         }
 
 
@@ -101,6 +104,27 @@ def _metrics(observations, renders) -> dict[str, float]:
         out[f"{split}_ssim"] = float(np.mean([ssim(renders[o.name], o.photograph, o.mask)
                                               for o in chosen]))
     return out
+
+
+def _free_scan(objective: Objective, theta: np.ndarray) -> dict | None:
+    """The seeds' per-channel scan of a fitted glass absorption around the fit, in ``scan.json``'s
+    format: free when the fit renders from path-length recordings (every point reweights the
+    recordings of Levenberg-Marquardt's first seed)."""
+    vector, compiled = objective.vector, objective.model.compiled
+    slices = vector.slices()
+    for name in vector.names:
+        spec = compiled.specs[name]
+        if spec.reweighting != "absorption" or name in vector.tied:
+            continue
+        s = slices[name]
+        grids = [default_grid(spec, v, 15) if v > spec.lower else np.linspace(0.0, 1.0, 15)
+                 for v in theta[s]]
+        curves = channel_curves(objective.problem(), theta, grids, objective.settings.spp,
+                                objective.settings.seed, offset=s.start)
+        return {"parameter": name, "unit": spec.unit,
+                "minimum": [parabola_minimum(g, c) for g, c in zip(grids, curves)],
+                "channels": [{"values": g.tolist(), "rmse": c.tolist()} for g, c in zip(grids, curves)]}
+    return None
 
 
 def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
@@ -133,7 +157,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
-    model = build_model(scene, capture, parameters, initial, settings.tie)
+    model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight)
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
@@ -167,6 +191,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     state = optimiser.run(objective, state, settings, iteration_done)
 
     theta = vector.to_physical(state.z)
+    scans = _free_scan(objective, theta) if objective.reweighted else None
     after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
     problem = objective.problem()
@@ -200,7 +225,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                for h in state.history]
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
                        metrics, method, state.iteration, counter.renders, counter.samples,
-                       previous_wall + time.perf_counter() - t0, history, views, truth, image_noise)
+                       previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
+                       scan=scans)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)

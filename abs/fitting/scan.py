@@ -16,7 +16,7 @@ import numpy as np
 
 from abs.model import build_model, typical_step
 
-__all__ = ["scan", "ScanResult", "default_grid"]
+__all__ = ["scan", "ScanResult", "default_grid", "channel_curves"]
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ def default_grid(spec, value: float, points: int) -> np.ndarray:
     return np.linspace(lo, hi, points)
 
 
-def _parabola_minimum(x: np.ndarray, y: np.ndarray) -> float:
+def parabola_minimum(x: np.ndarray, y: np.ndarray) -> float:
     i = int(np.argmin(y))
     if i == 0 or i == len(x) - 1:
         return float(x[i])  # at the edge of the grid: no bracket
@@ -74,7 +74,8 @@ def _parabola_minimum(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def scan(scene, capture, parameter: str, grid: np.ndarray | None = None, points: int = 15,
-         spp: int = 16, downsample: int = 2, seed: int = 0, on_point=None) -> ScanResult:
+         spp: int = 16, downsample: int = 2, seed: int = 0, on_point=None,
+         reweight: bool = True) -> ScanResult:
     """Scan ``parameter`` one channel at a time (see module docstring).
 
     Parameters
@@ -84,29 +85,45 @@ def scan(scene, capture, parameter: str, grid: np.ndarray | None = None, points:
     downsample : int
         Compare images reduced by this factor (the seeds scan at low resolution).
     on_point : callable, optional
-        Called after each rendered grid point (progress).
+        Called after each grid point (progress).
+    reweight : bool
+        Take every grid point of a parameter that path-length recordings reweight (a glass
+        absorption, the environment scale) from one recording per view, which is the same
+        render at every value (:mod:`abs.render.path_lengths`); ``False``: render each point,
+        as the seeds did.
     """
     t0 = time.perf_counter()
-    model = build_model(scene, capture, [parameter])
+    model = build_model(scene, capture, [parameter], reweight=reweight)
     initial = model.compiled.get(parameter)
     spec = model.compiled.specs[parameter]
-    counter = model.counter
     problem = model.problem("train", downsample)
-    # Residuals are stacked pixel by pixel with channels innermost: channel c is r[c::3].
-    grids, curves, minima = [], [], []
-    for c in range(len(initial)):
-        values = np.asarray(grid, np.float64) if grid is not None else default_grid(spec, initial[c], points)
+    grids = [np.asarray(grid, np.float64) if grid is not None else default_grid(spec, v, points)
+             for v in initial]
+    curves = channel_curves(problem, initial, grids, spp, seed, on_point)
+    minima = [parabola_minimum(g, c) for g, c in zip(grids, curves)]
+    return ScanResult(parameter, spec.unit, grids, curves, np.array(minima), model.counter.renders,
+                      model.counter.samples, time.perf_counter() - t0)
+
+
+def channel_curves(problem, theta: np.ndarray, grids: list[np.ndarray], spp: int, seed: int,
+                   on_point=None, offset: int = 0) -> list[np.ndarray]:
+    """RMSE of each colour channel as its scalar ``offset + c`` of ``theta`` steps through
+    ``grids[c]``, everything else held at ``theta`` (one curve per grid; one grid: a scalar
+    parameter scored on all channels).
+
+    Residuals are stacked pixel by pixel with channels innermost, so channel ``c`` is
+    ``r[c::3]``. Every point uses the seed ``seed`` (common random numbers: a smooth curve).
+    """
+    curves = []
+    for c, values in enumerate(grids):
         curve = []
         for v in values:
-            theta = initial.copy()
-            theta[c] = v
-            r, _ = problem.residuals(theta, spp, seed)
-            channel = r[c::3] if len(initial) == 3 else r
+            point = np.array(theta, np.float64)
+            point[offset + c] = v
+            r, _ = problem.residuals(point, spp, seed)
+            channel = r[c::3] if len(grids) == 3 else r
             curve.append(float(np.sqrt(np.mean(channel ** 2))))
             if on_point is not None:
                 on_point()
-        grids.append(values)
         curves.append(np.array(curve))
-        minima.append(_parabola_minimum(values, curves[-1]))
-    return ScanResult(parameter, spec.unit, grids, curves, np.array(minima), counter.renders,
-                      counter.samples, time.perf_counter() - t0)
+    return curves

@@ -66,6 +66,10 @@ class FitSettings:
         environment scale, sensor): raise ``spp`` instead, which those fits pay once.
     seed : int
         Base seed of all renders.
+    reweight : bool
+        Render from path-length recordings when every fitted parameter reweights (glass
+        absorption, environment scale, sensor; :mod:`abs.render.path_lengths`): a render per seed
+        and view, however many evaluations. ``False``: render every evaluation.
     tie : tuple of str
         Per-channel parameters fitted as one value for all channels (``("glass.ior",)``: an IOR
         whose dispersion the photographs do not resolve; three noisy channels would each be
@@ -86,6 +90,7 @@ class FitSettings:
     refinement_steps: int = 4
     seed: int = 0
     tie: tuple[str, ...] = ()
+    reweight: bool = True
 
     def __post_init__(self):
         from abs.fitting.optimisers import names

@@ -43,6 +43,9 @@ class ForwardModel:
         The varying parameters, laid out from their starting values.
     counter : RenderCounter
         Counts the renders of every problem of this model.
+    reweight : bool
+        Whether its problems render from path-length recordings where every varying parameter
+        reweights (:attr:`~abs.model.problem.FitProblem.uses_recordings`).
     """
 
     scene: object
@@ -50,6 +53,7 @@ class ForwardModel:
     capture: object
     vector: ParameterVector
     counter: RenderCounter = field(default_factory=RenderCounter)
+    reweight: bool = True
     _problems: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -88,12 +92,13 @@ class ForwardModel:
                       "all": self.capture.views}[views]
             self._problems[key] = FitProblem(self.compiled, self.vector,
                                              [observe(v, downsample) for v in chosen], clamp,
-                                             counter=self.counter)
+                                             counter=self.counter, reweight=self.reweight)
         return self._problems[key]
 
 
 def build_model(scene, capture, parameters: Sequence[str] | None = None,
-                initial: Mapping[str, object] | None = None, tied: Sequence[str] = ()) -> ForwardModel:
+                initial: Mapping[str, object] | None = None, tied: Sequence[str] = (),
+                reweight: bool = True) -> ForwardModel:
     """Load, compile and check a scene and capture, and lay out the parameters that vary.
 
     Parameters
@@ -112,6 +117,9 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
     tied : sequence of str, optional
         Per-channel parameters to fit as one value for all channels (see
         :class:`~abs.model.parameters.ParameterVector`).
+    reweight : bool
+        Render from path-length recordings where the parameters allow (``False``: always render,
+        as the seeds' scan does).
 
     Returns
     -------
@@ -136,4 +144,4 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
                                        tuple(tied))
     except ValueError as exc:
         raise InputError(None, "tie", str(exc)) from None
-    return ForwardModel(scene, compiled, capture, vector)
+    return ForwardModel(scene, compiled, capture, vector, reweight=reweight)

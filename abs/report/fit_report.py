@@ -68,6 +68,14 @@ def write_fit_report(folder: str | Path, summary: Mapping, views: Sequence[Repor
     if convergence:
         sections.append(html.section("Convergence", *convergence))
 
+    scan = summary.get("scan")
+    if scan:
+        truth = parameters.get(scan["parameter"], {}).get("truth")
+        figures.plot_scan(folder / "scan.png", scan, truth)
+        sections.append(html.section("Scan", html.figure(
+            "scan.png", f"the seeds' per-channel scan of {scan['parameter']} around the fit, "
+                        "reweighted from the fit's own path-length recordings (no renders)")))
+
     correlation = summary.get("correlation") or {}
     if correlation.get("names"):
         figures.plot_correlation(folder / "correlation.png", correlation["names"],

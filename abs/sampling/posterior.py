@@ -126,6 +126,9 @@ class RenderPosterior:
         pairs minus that render's, at the mode, times ``K / (K + 1)``
         (:mod:`abs.sampling.calibration`), so that the residuals stand for the average of all
         ``K + 1`` pairs near the mode.
+    reweight : bool
+        Evaluate from path-length recordings where the parameters allow (the two seeds'
+        recordings are made once and reweighted at every ``theta``).
     """
 
     scene: object
@@ -139,6 +142,7 @@ class RenderPosterior:
     clamp: float | None = None
     variant: str | None = None
     offset: np.ndarray | None = None
+    reweight: bool = True
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
     def problem(self):
@@ -152,7 +156,7 @@ class RenderPosterior:
             from abs.model import build_model
 
             scene = Path(self.scene) if isinstance(self.scene, str) else self.scene
-            model = build_model(scene, self.capture, self.names)
+            model = build_model(scene, self.capture, self.names, reweight=self.reweight)
             self.adopt(model.problem("train", self.downsample, self.clamp))
         return _LOCAL.problems[self.token]
 

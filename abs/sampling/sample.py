@@ -64,7 +64,7 @@ class SampleSettings:
         Chain length cap (steps of the whole ensemble, resumed runs included).
     max_renders : int or None
         Render budget of the chain (likelihood renders; each evaluation renders every training
-        view twice).
+        view twice; none from path-length recordings, where the budget does not bind).
     ball : float
         Walkers start at the fit plus ``ball`` Laplace standard errors times N(0, 1).
     check_every : int
@@ -82,6 +82,10 @@ class SampleSettings:
         Settings of the fit that gives the starting point (when no fit is given).
     seed : int
         Base of all seeds (renders and the sampler).
+    reweight : bool
+        Evaluate the likelihood from path-length recordings when every sampled parameter
+        reweights (glass absorption, environment scale, sensor): the two fixed seeds' renders
+        are then made once per view, and every evaluation reweights them (docs/sampling.md).
     """
 
     spp: int = 512
@@ -99,6 +103,7 @@ class SampleSettings:
     fit_iterations: int = 10
     fit_refinement_steps: int = 3
     seed: int = 0
+    reweight: bool = True
 
     def __post_init__(self):
         if (self.spp < 1 or self.downsample < 1 or self.max_steps < 1 or self.walkers < 0
@@ -223,7 +228,7 @@ def _fit_start(scene, capture, names, settings: SampleSettings,
     result = fit(scene, capture, names, FitSettings(
         spp=settings.spp, downsample=settings.downsample, clamp=settings.clamp,
         max_iterations=settings.fit_iterations, refinement_steps=settings.fit_refinement_steps,
-        seed=settings.seed), on_iteration=on_iteration)
+        seed=settings.seed, reweight=settings.reweight), on_iteration=on_iteration)
     parameters = result.summary()["parameters"]
     return {n: {"value": parameters[n]["value"], "stderr": parameters[n]["stderr"]} for n in names}
 
@@ -231,7 +236,8 @@ def _fit_start(scene, capture, names, settings: SampleSettings,
 def _identity(scene, capture, names, settings: SampleSettings) -> dict:
     # Only the settings the likelihood depends on: a longer chain or more walkers' worth of
     # checks continues the same run.
-    return run_identity(scene, capture, names, settings, keep=("spp", "downsample", "clamp", "seed"))
+    return run_identity(scene, capture, names, settings,
+                        keep=("spp", "downsample", "clamp", "seed", "reweight"))
 
 
 def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
@@ -372,7 +378,7 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     t0 = time.perf_counter()
     stage = on_stage or (lambda message: None)
     chain_path = Path(chain_path)
-    model = build_model(scene, capture, parameters)
+    model = build_model(scene, capture, parameters, reweight=settings.reweight)
     scene, names, vector = model.scene, model.names, model.vector
     capture = model.capture.folder
     problem = model.problem("train", settings.downsample, settings.clamp)
@@ -393,7 +399,8 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     def posterior_with(noise: NoiseModel, offset: np.ndarray | None = None) -> RenderPosterior:
         posterior = RenderPosterior(scene, str(capture), tuple(names), settings.spp,
                                     settings.downsample, seeds, noise.residual_variance(masks),
-                                    prior, settings.clamp, variant or mi.variant(), offset)
+                                    prior, settings.clamp, variant or mi.variant(), offset,
+                                    settings.reweight)
         posterior.adopt(problem)
         return posterior
 
@@ -439,8 +446,12 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     reduced_chi2 = float(np.mean(np.square((r_a + r_b) / 2) / posterior.variance))
 
     walkers = settings.n_walkers(vector.size)
-    per_eval = 2 * len(problem.observations)
-    max_evaluations = None if settings.max_renders is None else settings.max_renders // per_eval
+    # From path-length recordings the chain renders nothing: the two seeds' recordings were made
+    # with the mode (worker processes of a pool make their own once, uncounted).
+    recorded = problem.uses_recordings
+    per_eval = 0 if recorded else 2 * len(problem.observations)
+    max_evaluations = (None if settings.max_renders is None or recorded
+                       else settings.max_renders // per_eval)
     initial = None
     if not resuming:
         _write_meta(chain_path, identity, noise, start, offset, mode)
@@ -467,8 +478,8 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     predictive = posterior_predictive(model, chain, settings.predictive_draws,
                                       settings.eval_spp or scene.render.spp, settings.seed + 900,
                                       settings.clamp)
-    renders = (renders_before + problem.counter.renders - renders_during
-               + progress.evaluations * per_eval)
+    renders = (problem.counter.renders if recorded else
+               renders_before + problem.counter.renders - renders_during + progress.evaluations * per_eval)
     return SampleResult(tuple(names), sizes, vector.units, vector.labels(), chain, log_prob, progress,
                         burn, start, noise, reduced_chi2, renders, time.perf_counter() - t0,
                         settings, rhat, predictive, truth, posterior, mode)
