@@ -1,12 +1,20 @@
 """Gradient fit against the seeds' per-channel scan, on the same synthetic capture.
 
 Simulates a noisy capture of the default scene (glass sphere on a tablecloth before a printed
-checkerboard) with known absorption, then estimates ``glass.absorption`` twice from the same wrong
-start: ``abs.fit`` (Levenberg-Marquardt + refinement) and ``abs.scan`` (per-channel RMSE scans).
-Reports renders used, camera samples, wall time and the final relative error per channel, and the
-ratios scan / fit, all measured in this one run. Writes ``benchmarks/results/fit_vs_scan.json``.
+checkerboard) with known absorption, then estimates ``glass.absorption`` three ways from the same
+wrong start, in this one run:
 
-    python benchmarks/fit_vs_scan.py [--width 96 --height 72 --spp 16 --points 15]
+- ``scan``: the seeds' method (``abs.scan`` with every grid point rendered, one channel at a time);
+- ``fit_rendered``: ``abs.fit`` rendering every evaluation (Levenberg-Marquardt + Gauss-Newton
+  refinement on fresh renders: the fit before path-length recordings);
+- ``fit_recorded``: ``abs.fit`` from path-length recordings (``abs.render.path_lengths``): a
+  recording per view and seed, reweighted at every evaluation, at ``--recorded-spp``.
+
+Reports renders, camera samples (everything each call rendered, the fits' before/after images
+included), wall time and the final relative error per channel, and the ratios to the recorded
+fit. Writes ``benchmarks/results/fit_vs_scan.json``.
+
+    python benchmarks/fit_vs_scan.py [--width 96 --height 72 --spp 16 --recorded-spp 4 --points 15]
 """
 
 from __future__ import annotations
@@ -35,6 +43,9 @@ def main() -> None:
     p.add_argument("--height", type=int, default=72)
     p.add_argument("--spp", type=int, default=16, help="samples per pixel of both methods' renders")
     p.add_argument("--points", type=int, default=15, help="scan grid points per channel")
+    p.add_argument("--recorded-spp", type=int, default=4,
+                   help="samples per pixel of the recorded fit's recordings and images")
+    p.add_argument("--pairs", type=int, default=4, help="the recorded fit's further seed pairs")
     args = p.parse_args()
 
     scene = load_scene(ROOT / "scenes/default/scene.toml").with_render(spp=32)
@@ -45,28 +56,42 @@ def main() -> None:
         simulate_capture(load_scene(tmp / "truth.toml"), tmp / "capture", n_cameras=3,
                          width=args.width, height=args.height, spp=512, shot_noise=1e-4,
                          read_noise=0.003, seed=3)
-        fitted = fit(tmp / "start.toml", tmp / "capture", ["glass.absorption"],
-                     FitSettings(spp=args.spp, max_iterations=12, refinement_steps=4))
+        recorded = fit(tmp / "start.toml", tmp / "capture", ["glass.absorption"],
+                       FitSettings(spp=args.recorded_spp, max_iterations=12,
+                                   refinement_steps=args.pairs, eval_spp=args.recorded_spp))
+        rendered = fit(tmp / "start.toml", tmp / "capture", ["glass.absorption"],
+                       FitSettings(spp=args.spp, max_iterations=12, refinement_steps=4, reweight=False))
         scanned = scan(tmp / "start.toml", tmp / "capture", "glass.absorption", points=args.points,
-                       spp=args.spp, downsample=1, grid=np.linspace(5.0, 50.0, args.points))
+                       spp=args.spp, downsample=1, grid=np.linspace(5.0, 50.0, args.points),
+                       reweight=False)
+
+    def fit_row(result):
+        se = result.vector.split(result.uncertainty.stderr)["glass.absorption"]
+        return {"renders": result.renders, "samples": result.samples_rendered,
+                "wall_s": result.wall_s, "estimate": result.values["glass.absorption"].tolist(),
+                "stderr": se.tolist()}
 
     rows = {
-        "fit": {"renders": fitted.renders, "samples": fitted.samples_rendered,
-                "wall_s": fitted.wall_s, "estimate": fitted.values["glass.absorption"].tolist()},
+        "fit_recorded": fit_row(recorded),
+        "fit_rendered": fit_row(rendered),
         "scan": {"renders": scanned.renders, "samples": scanned.samples_rendered,
                  "wall_s": scanned.wall_s, "estimate": scanned.minimum.tolist()},
     }
     for row in rows.values():
         row["relative_error"] = (np.abs(np.array(row["estimate"]) / TRUTH - 1)).tolist()
-    ratios = {k: rows["scan"][k] / rows["fit"][k] for k in ("renders", "samples", "wall_s")}
-    ratios["max_relative_error"] = max(rows["scan"]["relative_error"]) / max(rows["fit"]["relative_error"])
+    base = rows["fit_recorded"]
+    ratios = {f"{name}_over_recorded": {k: row[k] / base[k] for k in ("renders", "samples", "wall_s")}
+              | {"max_relative_error": max(row["relative_error"]) / max(base["relative_error"])}
+              for name, row in rows.items() if name != "fit_recorded"}
 
-    print(f"truth {TRUTH.tolist()} 1/m, start {START.tolist()}, {args.width}x{args.height}, {args.spp} spp")
-    print(f"{'method':6} {'renders':>8} {'samples':>12} {'wall s':>8}  estimate (relative error)")
+    print(f"truth {TRUTH.tolist()} 1/m, start {START.tolist()}, {args.width}x{args.height}, "
+          f"{args.spp} spp (recorded fit: {args.recorded_spp})")
+    print(f"{'method':13} {'renders':>8} {'samples':>12} {'wall s':>8}  estimate (relative error)")
     for name, row in rows.items():
         est = ", ".join(f"{e:.2f} ({r:.1%})" for e, r in zip(row["estimate"], row["relative_error"]))
-        print(f"{name:6} {row['renders']:8d} {row['samples']:12d} {row['wall_s']:8.1f}  {est}")
-    print("ratios scan / fit: " + ", ".join(f"{k} {v:.2f}" for k, v in ratios.items()))
+        print(f"{name:13} {row['renders']:8d} {row['samples']:12d} {row['wall_s']:8.1f}  {est}")
+    for name, r in ratios.items():
+        print(f"{name}: " + ", ".join(f"{k} {v:.2f}" for k, v in r.items()))
     out = ROOT / "benchmarks/results/fit_vs_scan.json"
     out.parent.mkdir(exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "settings": vars(args),

@@ -1,15 +1,17 @@
-"""Effective samples per second and per render: emcee against the adaptive independence sampler,
-on the same posterior, from one run.
+"""Effective samples per second and per render: emcee rendering every evaluation, emcee on
+path-length recordings, and the adaptive independence sampler, on the same posterior, in one run.
 
-One synthetic glass capture (default scene, absorption per RGB channel), one ``abs.fit``; then
-``abs.sample`` prepares the posterior (noise model, mode of the fixed-seed likelihood, seed-pair
-calibration: the same for any sampler, so reported once, apart) and runs emcee's ensemble from the
-mode; the independence Metropolis-Hastings sampler of ``abs.sampling.independence`` (a Student-t
-proposal from the Laplace covariance at the mode, adapted by importance sampling on a third of
-its evaluations) then evaluates the same calibrated :class:`RenderPosterior` as many times.
+One synthetic glass capture (default scene; glass absorption per RGB channel and the environment
+scale), one ``abs.fit``; then ``abs.sample`` twice from the same start: rendering both fixed-seed
+renders at every evaluation (``reweight=False``, as before path-length recordings), and from
+recordings (``abs.render.path_lengths``: the two seeds' renders are made once and reweighted at
+every evaluation). The rendered run's prepared posterior is then sampled by the independence
+Metropolis-Hastings sampler of ``abs.sampling.independence`` (a Student-t proposal from the
+Laplace covariance at the mode, adapted by importance sampling on a third of its evaluations).
 Effective sample size per scalar: samples / integrated autocorrelation time (emcee's estimator,
-burn-in removed); the worst scalar counts. Wall time and renders of each sampler are its chain's
-only. Writes ``benchmarks/results/sampling_efficiency.json``.
+burn-in removed); the worst scalar counts. Renders per row: the chain's likelihood renders, and
+for the recorded run also everything its preparation rendered (noise model, mode, calibration),
+since there the chain renders nothing. Writes ``benchmarks/results/sampling_efficiency.json``.
 
     python benchmarks/sampling_efficiency.py [--evaluations 240 --width 32 --height 24 --spp 512]
 """
@@ -44,32 +46,50 @@ def main() -> None:
     p.add_argument("--spp", type=int, default=512, help="sampler renders (abs sample's default)")
     p.add_argument("--fit-spp", type=int, default=64, help="the starting fit's renders")
     p.add_argument("--walkers", type=int, default=8)
+    p.add_argument("--recorded-evaluations", type=int, default=4800,
+                   help="log-posterior evaluations of the recorded run (they render nothing)")
     args = p.parse_args()
 
+    names = [PARAMETER, "environment.scale"]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         capture = make_dataset(tmp, TRUTH, args.width, args.height, seed=11)
-        fitted = fit(tmp / "scene.toml", capture, [PARAMETER],
+        fitted = fit(tmp / "scene.toml", capture, names,
                      FitSettings(spp=args.fit_spp, downsample=2, max_iterations=8, refinement_steps=2),
                      initial={PARAMETER: [6.0, 6.0, 6.0]})
-        entry = fitted.summary()["parameters"][PARAMETER]
+        start = {n: {"value": fitted.summary()["parameters"][n]["value"],
+                     "stderr": fitted.summary()["parameters"][n]["stderr"]} for n in names}
         steps = args.evaluations // args.walkers - 1
-        stages, t0 = {}, time.perf_counter()
-        result = sample(tmp / "scene.toml", capture, [PARAMETER],
-                        SampleSettings(spp=args.spp, downsample=2, walkers=args.walkers, max_steps=steps,
-                                       predictive_draws=0),
-                        chain_path=tmp / "chain.h5",
-                        start={PARAMETER: {"value": entry["value"], "stderr": entry["stderr"]}},
-                        on_stage=lambda message: stages.setdefault(message.split(" (")[0],
-                                                                   time.perf_counter()))
-        t_end = time.perf_counter()
+        runs = {}
+        for reweight in (False, True):
+            stages, t0 = {}, time.perf_counter()
+            result = sample(tmp / "scene.toml", capture, names,
+                            SampleSettings(spp=args.spp, downsample=2, walkers=args.walkers,
+                                           max_steps=(args.recorded_evaluations // args.walkers - 1
+                                                      if reweight else steps),
+                                           predictive_draws=0, reweight=reweight),
+                            chain_path=tmp / f"chain_{reweight}.h5", start=start,
+                            on_stage=lambda message, st=stages: st.setdefault(message.split(" (")[0],
+                                                                              time.perf_counter()))
+            runs[reweight] = (result, stages, t0, time.perf_counter())
+        result, stages, t0, t_end = runs[False]
         s = result.summary()
         per_eval = 2 * 1  # two fixed-seed renders of the one training view
         wall_emcee = stages["posterior predictive"] - stages["chain"]
         preparation = {"wall_s": stages["chain"] - t0,
                        "renders": s["renders"] - s["evaluations"] * per_eval,
                        "sample_wall_s": t_end - t0}
-        ess_emcee = min((e for e in s["parameters"][PARAMETER]["ess"] if e is not None), default=np.nan)
+
+        def ess_min(summary):
+            return min((e for n in names for e in summary["parameters"][n]["ess"] if e is not None),
+                       default=np.nan)
+
+        def moments(summary, key):
+            return [v for n in names for v in summary["parameters"][n][key]]
+
+        ess_emcee = ess_min(s)
+        rec, rec_stages, rec_t0, rec_end = runs[True]
+        rs = rec.summary()
 
         # The same calibrated posterior (noise model, seeds, offset, compiled scene) for the
         # independence sampler, proposing from its own Laplace approximation at the mode:
@@ -88,18 +108,30 @@ def main() -> None:
     rows = {
         "emcee": {"evaluations": s["evaluations"], "renders": s["evaluations"] * per_eval,
                   "wall_s": wall_emcee, "ess_min": ess_emcee, "acceptance": s["acceptance_fraction"],
-                  "mean": s["parameters"][PARAMETER]["mean"], "sd": s["parameters"][PARAMETER]["sd"]},
+                  "mean": moments(s, "mean"), "sd": moments(s, "sd")},
         # The Jacobian costs one attached render per scalar, counted as one evaluation each.
         "independence_adaptive": {"evaluations": run.evaluations + J.shape[1],
                                   "renders": (run.evaluations + J.shape[1]) * per_eval,
                                   "wall_s": wall_ind, "ess_min": ess_ind,
                                   "acceptance": run.acceptance_fraction,
                                   "mean": chain.mean(axis=0).tolist(), "sd": chain.std(axis=0).tolist()},
+        # Every render of the run (preparation included): its chain renders nothing.
+        "emcee_recorded": {"evaluations": rs["evaluations"], "renders": rs["renders"],
+                           "wall_s": rec_stages["posterior predictive"] - rec_stages["chain"],
+                           "ess_min": ess_min(rs), "acceptance": rs["acceptance_fraction"],
+                           "mean": moments(rs, "mean"), "sd": moments(rs, "sd"),
+                           "sample_wall_s": rec_end - rec_t0},
     }
     for row in rows.values():
         row["ess_per_s"] = row["ess_min"] / row["wall_s"]
         row["ess_per_render"] = row["ess_min"] / row["renders"]
     ratios = {k: rows["independence_adaptive"][k] / rows["emcee"][k] for k in ("ess_per_s", "ess_per_render")}
+    recorded = {"ess_per_render": rows["emcee_recorded"]["ess_per_render"] / rows["emcee"]["ess_per_render"],
+                "ess_per_s": rows["emcee_recorded"]["ess_per_s"] / rows["emcee"]["ess_per_s"],
+                # Equal posterior: means within 0.2 sd, sds within 10 %.
+                "mean_shift_in_sd": (np.abs(np.subtract(rows["emcee_recorded"]["mean"], rows["emcee"]["mean"]))
+                                     / np.array(rows["emcee"]["sd"])).tolist(),
+                "sd_ratio": (np.array(rows["emcee_recorded"]["sd"]) / np.array(rows["emcee"]["sd"])).tolist()}
     print(f"{'sampler':<22} {'evals':>6} {'wall s':>7} {'min ESS':>8} {'ESS/s':>7} {'ESS/render':>11} {'accept':>7}")
     for name, r in rows.items():
         print(f"{name:<22} {r['evaluations']:>6} {r['wall_s']:>7.1f} {r['ess_min']:>8.1f} "
@@ -108,10 +140,14 @@ def main() -> None:
           f"{preparation['renders']} renders")
     print(f"ratio independence / emcee: ESS/s {ratios['ess_per_s']:.2f}, ESS/render "
           f"{ratios['ess_per_render']:.2f}")
-    report = {"truth": TRUTH.tolist(), "fit": entry, "mode": result.mode.tolist(),
+    print(f"recorded / rendered emcee: ESS/render {recorded['ess_per_render']:.1f}, ESS/s "
+          f"{recorded['ess_per_s']:.1f}; means apart by {np.round(recorded['mean_shift_in_sd'], 2)} sd, "
+          f"sd ratios {np.round(recorded['sd_ratio'], 3)}")
+    report = {"truth": TRUTH.tolist(), "parameters": names, "fit": start, "mode": result.mode.tolist(),
               "render_scale": result.noise.render_scale, "preparation": preparation,
               "samplers": rows,
-              "ratio_independence_over_emcee": ratios, "config": vars(args),
+              "ratio_independence_over_emcee": ratios, "recorded_over_rendered_emcee": recorded,
+              "config": vars(args),
               "machine": platform.platform()}
     write_json(RESULTS, json.loads(json.dumps(report, default=float).replace("NaN", "null")))
     print(f"wrote {RESULTS}")

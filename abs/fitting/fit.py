@@ -21,6 +21,7 @@ from abs.fitting.checks import run_checks
 from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
 from abs.fitting.objective import Objective
 from abs.fitting.optimisers import OptimizerState, get
+from abs.fitting.optimisers.lm import pair_seeds
 from abs.fitting.scan import channel_curves, default_grid, parabola_minimum
 from abs.fitting.settings import FitSettings
 from abs.metrics import ssim
@@ -193,12 +194,16 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     theta = vector.to_physical(state.z)
     scans = _free_scan(objective, theta) if objective.reweighted else None
     after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
-    # Uncertainty at the optimum, from fresh renders (a new seed: the Jacobian's own noise).
+    # Uncertainty at the optimum, from renders independent of each other (the Jacobian's own
+    # noise): fresh ones, or from recordings the seed pairs' recordings (their solutions are
+    # averaged, so the optimum depends on each pair's noise by a share only).
     problem = objective.problem()
-    r, J = problem.residuals(theta, settings.spp, settings.seed + 99, jacobian=True,
-                             jacobian_seed=settings.seed + 98)
+    seeds = (settings.seed + 99, settings.seed + 98, settings.seed + 97)
+    if objective.reweighted and settings.refinement_steps >= 1 and method == "lm":
+        seeds = (*pair_seeds(settings.seed, 1), pair_seeds(settings.seed, 0)[0])
+    r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
     prior = np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None
-    J2 = problem.jacobian(theta, settings.spp, settings.seed + 97)
+    J2 = problem.jacobian(theta, settings.spp, seeds[2])
     uncertainty = laplace(r, J, prior, jacobian2=J2)
     # A curvature that one pair of noisy Jacobians leaves unresolved may be resolved by more
     # pairs (an IOR's column through glass is noisy): up to three more before saying so.

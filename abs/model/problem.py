@@ -39,8 +39,9 @@ from abs.render.compiled import CompiledScene
 
 __all__ = ["FitProblem", "render_views"]
 
-#: Memory for a problem's path-length recordings (bytes); the least recently used go first.
-RECORDING_BYTES = 1 << 30
+#: Memory for a problem's path-length recordings (bytes; 31 MB each at 320x240): the least
+#: recently used go first.
+RECORDING_BYTES = 4 << 30
 
 
 def _view_seed(seed: int, view: int) -> int:

@@ -496,7 +496,7 @@ class CompiledScene:
             The glass material (``"auto"``: :meth:`glass_material`; ``None``: no lengths, only
             scale and sensor reweight).
         bins : LengthBins, optional
-            Default: 64 nodes up to 4 diagonals of the bounding box of the material's objects.
+            Default: 32 nodes up to 4 diagonals of the bounding box of the material's objects.
         absorption_per_m : float or array-like of 3
             The absorption (1/m) to record at; 0 (the default) makes every reweighting an
             attenuation, whose variance is at most the recording's.

@@ -29,6 +29,9 @@ Three modes and a replay, one loop body (:meth:`PathTracer._step`):
   about two primal renders, exact for every parameter whose derivative stays at its vertex
   (textures, BRDF tables, absorption, environment); parameters that move paths (IOR, roughness,
   pose) take forward mode.
+- recording (:meth:`PathTracer.record`): a primal pass that bins every vertex's light by the
+  length its path has travelled inside one glass, so that the image at any absorption of that
+  glass follows without rendering (:mod:`abs.render.path_lengths`).
 
 Pieces:
 

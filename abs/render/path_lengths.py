@@ -19,7 +19,7 @@ Binning. Lengths are recorded on ``n_nodes`` equally spaced nodes ``L_k = k * sp
 (tent) interpolation: light at length ``L`` between nodes ``k`` and ``k + 1`` is split between
 them in proportion to its distance from each. Reweighting then evaluates ``exp(-dsigma L)`` at the
 nodes, which is linear interpolation of the exponential: its relative error is at most
-``(dsigma * spacing)^2 / 8`` (0.1 % for ``dsigma = 10 /m`` at 9 mm spacing). Paths never in glass
+``(dsigma * spacing)^2 / 8`` (0.4 % for ``dsigma = 10 /m`` at 18 mm spacing). Paths never in glass
 sit exactly on node 0. Light beyond the last node (long internal bounces, rare and faint) goes to
 an overflow pair per pixel and channel, its sum and its length-weighted sum, and is reweighted at
 its mean length. Memory: ``(n_nodes + 2)`` floats per pixel and channel.
@@ -46,8 +46,9 @@ from abs.render.jit import opaque
 
 __all__ = ["PathLengthRecording", "LengthBins", "length_bins", "bin_light", "reweight"]
 
-#: Nodes per pixel and channel by default: 9 mm spacing for the default scene's 4 cm sphere.
-DEFAULT_NODES = 64
+#: Nodes per pixel and channel by default: 18 mm apart for the default scene's 4 cm sphere
+#: (relative error of the reweighting at most 0.07 % for a change of 4 per metre, 0.4 % for 10).
+DEFAULT_NODES = 32
 
 #: Recorded lengths reach this many times the glass's bounding-box diagonal before overflowing.
 _DIAGONALS = 4.0
