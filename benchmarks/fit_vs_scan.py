@@ -14,7 +14,7 @@ Reports renders, camera samples (everything each call rendered, the fits' before
 included), wall time and the final relative error per channel, and the ratios to the recorded
 fit. Writes ``benchmarks/results/fit_vs_scan.json``.
 
-    python benchmarks/fit_vs_scan.py [--width 96 --height 72 --spp 16 --recorded-spp 4 --points 15]
+    python benchmarks/fit_vs_scan.py [--width 96 --height 72 --spp 16 --recorded-spp 4 --pairs 2 --points 15]
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def main() -> None:
     p.add_argument("--points", type=int, default=15, help="scan grid points per channel")
     p.add_argument("--recorded-spp", type=int, default=4,
                    help="samples per pixel of the recorded fit's recordings and images")
-    p.add_argument("--pairs", type=int, default=4, help="the recorded fit's further seed pairs")
+    p.add_argument("--pairs", type=int, default=2, help="the recorded fit's further seed pairs")
     args = p.parse_args()
 
     scene = load_scene(ROOT / "scenes/default/scene.toml").with_render(spp=32)

