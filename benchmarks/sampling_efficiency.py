@@ -13,7 +13,7 @@ burn-in removed); the worst scalar counts. Renders per row: the chain's likeliho
 for the recorded run also everything its preparation rendered (noise model, mode, calibration),
 since there the chain renders nothing. Writes ``benchmarks/results/sampling_efficiency.json``.
 
-    python benchmarks/sampling_efficiency.py [--evaluations 240 --width 32 --height 24 --spp 512]
+    python benchmarks/sampling_efficiency.py [--evaluations 240 --recorded-evaluations 32000 --width 32 --height 24 --spp 512]
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def main() -> None:
     p.add_argument("--spp", type=int, default=512, help="sampler renders (abs sample's default)")
     p.add_argument("--fit-spp", type=int, default=64, help="the starting fit's renders")
     p.add_argument("--walkers", type=int, default=8)
-    p.add_argument("--recorded-evaluations", type=int, default=4800,
+    p.add_argument("--recorded-evaluations", type=int, default=32000,
                    help="log-posterior evaluations of the recorded run (they render nothing)")
     args = p.parse_args()
 

@@ -144,5 +144,5 @@ def test_recording_refuses_parameters_that_move_paths(scene):
     recording = compiled.record(camera, spp=1)
     with pytest.raises(ValueError, match="glass.ior change the light paths"):
         compiled.render_recorded_forward(recording, camera, {"glass.ior": [1.0, 1.0, 1.0]})
-    assert compiled.reweightable(["glass.absorption", "environment.scale", "sensor.response",
+    assert compiled.needs_render(["glass.absorption", "environment.scale", "sensor.response",
                                   "glass.ior"], "glass") == ["glass.ior"]

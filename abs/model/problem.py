@@ -112,7 +112,7 @@ class FitProblem:
         owners = {self.compiled.specs[n].owner for n in self.vector.names
                   if self.compiled.specs[n].reweighting == "absorption"}
         return (self.reweight and len(owners) <= 1
-                and not self.compiled.reweightable(self.vector.names, self.recorded_material))
+                and not self.compiled.needs_render(self.vector.names, self.recorded_material))
 
     def _fingerprint(self) -> str:
         """A digest of every compiled value a recording depends on (those it cannot reweight),
@@ -120,7 +120,7 @@ class FitProblem:
         material = self.recorded_material
         digest = hashlib.sha1()
         for name in sorted(self.compiled.values):
-            if self.compiled.reweightable([name], material):
+            if self.compiled.needs_render([name], material):
                 digest.update(name.encode())
                 digest.update(self.compiled.get(name).tobytes())
         return digest.hexdigest()

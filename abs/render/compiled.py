@@ -544,9 +544,9 @@ class CompiledScene:
         histogram = histogram.numpy().reshape(camera.height, camera.width, 3, bins.slots)
         return PathLengthRecording(histogram, bins, material, recorded, env_scale, spp, seed)
 
-    def reweightable(self, names, material: str | None) -> list[str]:
-        """Those of ``names`` that a recording of ``material``'s lengths does not give (empty:
-        every one reweights)."""
+    def needs_render(self, names, material: str | None) -> list[str]:
+        """Those of ``names`` whose new values need a new render: the parameters a recording of
+        ``material``'s path lengths does not reweight (empty: it gives every one)."""
         out = []
         for name in names:
             how = self._spec(name).reweighting
@@ -576,7 +576,7 @@ class CompiledScene:
         """:meth:`render_forward` from a recording: the view and its derivative along
         ``tangents``, which may name only parameters the recording reweights (the absorption in
         closed form, the scale, the sensor by forward mode through it)."""
-        others = self.reweightable(tangents, recording.material)
+        others = self.needs_render(tangents, recording.material)
         if others:
             raise ValueError(f"{', '.join(others)} change the light paths (or are not recorded): "
                              "a recording cannot differentiate them")
