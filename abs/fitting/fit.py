@@ -195,8 +195,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     scans = _free_scan(objective, theta) if objective.reweighted else None
     after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from renders independent of each other (the Jacobian's own
-    # noise): fresh ones, or from recordings the seed pairs' recordings (their solutions are
-    # averaged, so the optimum depends on each pair's noise by a share only).
+    # noise): fresh ones, or, from recordings, those of the refinement's seed pairs (the optimum
+    # minimises the mean over all pairs, so it depends on any one pair's noise by a share only).
     problem = objective.problem()
     seeds = (settings.seed + 99, settings.seed + 98, settings.seed + 97)
     if objective.reweighted and settings.refinement_steps >= 1 and method == "lm":

@@ -66,8 +66,8 @@ class LMState:
         Levenberg-Marquardt's verdict once it has finished (``None``: not yet).
     refinement : RefinementState
     pairs : bool
-        The refinement's points are the solutions of independent pairs of path-length
-        recordings (:func:`recording_pairs`), not Gauss-Newton steps.
+        The refinement's points are one Newton step from the solution per seed pair of
+        path-length recordings (:func:`recording_pairs`), not Gauss-Newton iterates.
     """
 
     converged: bool | None = None
@@ -149,7 +149,7 @@ class LevenbergMarquardt(Optimiser):
         refinement = solver.refinement
         if not refinement.points:
             return None
-        if solver.pairs:  # independent solutions, all of them
+        if solver.pairs:  # one point per independent seed pair, all of them
             return np.asarray(refinement.points, np.float64)
         return averaged_refinement_points(refinement.points, refinement.clipped)
 
@@ -172,11 +172,11 @@ def recording_pairs(objective, state: OptimizerState, settings,
     refinement removes with fresh renders at every step. Its scatter: on the default scene at
     160x120 and 16 spp a glass absorption's solution scattered by 2 per metre between seed pairs,
     fifteen times its Laplace error (which sees the average pixel noise, not that the glass's few
-    pixels are far noisier). And a bias: the objective's gradient is unbiased at every point, but
-    its minimiser is not, because the curvature and the gradient of one pair share the pair's
-    noise (measured at 320x240: green absorption 1.29 +- 0.04 per metre from each of five
-    separately solved 64-spp pairs, 1.41 at 512 spp). Both shrink as ``1 / K`` when the objective
-    is averaged over ``K`` independent pairs, and from recordings that costs only their
+    pixels are far noisier). And a bias of order ``1 / spp``: the objective's gradient is unbiased
+    at every point, but its minimiser is not quite, because one pair's curvature and gradient
+    share that pair's noise. Both shrink as ``1 / K`` when the objective is averaged over ``K``
+    independent pairs (a solution per pair would keep the bias), and from recordings that costs
+    only their
     recordings: Levenberg-Marquardt minimises the mean two-seed objective of pair 0 (the first
     solve) and ``refinement_steps`` further pairs, stacked as one pair of residual vectors scaled
     by ``1 / sqrt(K)``. Its remaining Monte-Carlo error is measured by the pairs' own gradients
