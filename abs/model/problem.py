@@ -94,12 +94,16 @@ class FitProblem:
         return 3 * sum(o.pixels for o in self.observations)
 
     # --------------------------------------------------------- recordings
+    def _absorption_owners(self) -> list[str]:
+        """The materials whose absorption is fitted, sorted."""
+        return sorted({self.compiled.specs[n].owner for n in self.vector.names
+                       if self.compiled.specs[n].reweighting == "absorption"})
+
     @property
     def recorded_material(self) -> str | None:
         """The glass whose path lengths recordings keep: the owner of the fitted absorption
         (``None`` when no absorption is fitted)."""
-        owners = sorted({self.compiled.specs[n].owner for n in self.vector.names
-                         if self.compiled.specs[n].reweighting == "absorption"})
+        owners = self._absorption_owners()
         return owners[0] if owners else None
 
     @property
@@ -109,9 +113,7 @@ class FitProblem:
         sensor parameter. Then a render at another value of them is a reweighting, and only a new
         seed (or spp) renders: a fit's Jacobians, line searches and a sampler's likelihood
         evaluations render nothing."""
-        owners = {self.compiled.specs[n].owner for n in self.vector.names
-                  if self.compiled.specs[n].reweighting == "absorption"}
-        return (self.reweight and len(owners) <= 1
+        return (self.reweight and len(self._absorption_owners()) <= 1
                 and not self.compiled.needs_render(self.vector.names, self.recorded_material))
 
     def _fingerprint(self) -> str:

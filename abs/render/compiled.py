@@ -293,6 +293,12 @@ class CompiledScene:
         dr.traverse(dr.ADMode.Forward, dr.ADFlag.ClearEdges)
         return leaves
 
+    def _detach(self, names) -> None:
+        """Write the named parameters' current values back detached (ends what
+        :meth:`_push_tangents` or an attached leaf started)."""
+        for name in names:
+            self.set(name, from_numpy(mi.Float, self.get(name)))
+
     def _through_sensor_forward(self, camera: Camera, image, derivative):
         """The sensor applied to an image and its derivative (the sensor's own tangents added)."""
         with dr.resume_grad():
@@ -351,8 +357,7 @@ class CompiledScene:
                 dr.eval(image, derivative)
             return self._through_sensor_forward(camera, image, derivative)
         finally:
-            for name in tangents:
-                self.set(name, from_numpy(mi.Float, self.get(name)))
+            self._detach(tangents)
 
     def forward_renders(self, tangents: dict, differences: bool = True) -> int:
         """How many renders :meth:`render_forward` makes for ``tangents``: one, or three when a
@@ -466,8 +471,7 @@ class CompiledScene:
                 recorded = self.sensor.apply(image, camera).numpy().astype(np.float64)
             return recorded, {name: dr.grad(leaves[name]).numpy().astype(np.float64) for name in names}
         finally:
-            for name in names:
-                self.set(name, from_numpy(mi.Float, self.get(name)))
+            self._detach(names)
 
 
     # ------------------------------------------------------- recordings
@@ -593,8 +597,7 @@ class CompiledScene:
                 camera, mi.TensorXf(from_numpy(mi.Float, radiance), radiance.shape),
                 mi.TensorXf(from_numpy(mi.Float, derivative), derivative.shape))
         finally:
-            for name in sensor:
-                self.set(name, from_numpy(mi.Float, self.get(name)))
+            self._detach(sensor)
 
 
 def compile_scene(scene: Scene) -> CompiledScene:

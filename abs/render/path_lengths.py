@@ -66,11 +66,6 @@ class LengthBins:
         """Floats per pixel and channel: the nodes, the overflow sum and its length moment."""
         return self.n_nodes + 2
 
-    @property
-    def length_max(self) -> float:
-        """The last node's length (m); longer paths overflow."""
-        return (self.n_nodes - 1) * self.spacing
-
 
 def length_bins(diagonal_m: float, n_nodes: int = DEFAULT_NODES) -> LengthBins:
     """Nodes for glass whose bounding box has diagonal ``diagonal_m`` (m): up to 4 diagonals.

@@ -196,21 +196,21 @@ def recording_pairs(objective, state: OptimizerState, settings,
     def pairs(z):
         return [_two_renders(objective, z, seed, settings.downsample) for seed in seeds]
 
-    def joint(z, iteration):
-        parts = pairs(z)
+    def stack(parts):
         scale = 1.0 / np.sqrt(len(parts))
         stacked = [tuple(np.concatenate([p[side][i] for p in parts]) * scale for i in (0, 1))
                    for side in (0, 1)]
         return stacked[0], stacked[1], float(np.mean([p[2] for p in parts]))
 
-    inner = levenberg_marquardt(joint, OptimizerState(state.method, 0, np.array(state.z, np.float64)),
+    inner = levenberg_marquardt(lambda z, iteration: stack(pairs(z)),
+                                OptimizerState(state.method, 0, np.array(state.z, np.float64)),
                                 settings.max_iterations, settings.rtol, settings.atol)
     for entry in inner.history:
         state.iteration += 1
         state.history.append({**entry, "iteration": state.iteration, "phase": f"{len(seeds)} pairs"})
     z = np.array(inner.z, np.float64)
     parts = pairs(z)
-    (ra, Ja), (rb, Jb), _ = joint(z, 0)
+    (_, Ja), (_, Jb), _ = stack(parts)
     H = cross_curvature(Ja, Jb)
     points = [z - np.linalg.solve(H, 0.5 * (pa[1].T @ pb[0] + pb[1].T @ pa[0]))
               for pa, pb, _ in parts]
