@@ -16,6 +16,21 @@ import numpy as np
 from abs.render.integrator import PathTracer
 
 
+def gradient_setup(scene_file, size: int, eye, target, fov_deg: float, weight_seed: int):
+    """A compiled scene, a square ``size``-pixel camera at ``eye`` looking at ``target`` and
+    random loss weights in [0, 1) (seeded ``weight_seed``): the fixture of the gradient tests."""
+    from abs.camera.pinhole import intrinsics_from_fov, look_at
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    compiled = compile_scene(load_scene(scene_file))
+    R, t = look_at(np.asarray(eye, float), np.asarray(target, float))
+    camera = Camera(intrinsics_from_fov(size, size, np.radians(fov_deg)), R, t, size, size)
+    weights = mi.TensorXf(np.random.default_rng(weight_seed).uniform(0, 1, (size, size, 3))
+                          .astype(np.float32))
+    return compiled, camera, weights
+
+
 def directional_gradient(compiled, camera, name, direction, h, weights, seeds=4, spp=64,
                          max_depth=4, edges=True, full=False, mode="forward"):
     """(AD mean, AD s.e., FD mean, FD s.e.) of d loss / d(h-step along ``direction``).

@@ -11,22 +11,17 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from abs.camera.pinhole import intrinsics_from_fov, look_at
-from abs.render import Camera, compile_scene
+from abs.render import compile_scene
 from abs.scene import load_scene, write_scene
 from conftest import assert_same_rendering
-from gradcheck import assert_gradients_agree, directional_gradient
+from gradcheck import assert_gradients_agree, directional_gradient, gradient_setup
 
 W = H = 24
 
 
 @pytest.fixture(scope="module")
 def setup(small_scene_dir):
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.1, 0.3]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(W, H, np.radians(60)), R, t, W, H)
-    weights = mi.TensorXf(np.random.default_rng(2).uniform(0, 1, (H, W, 3)).astype(np.float32))
-    return compiled, camera, weights
+    return gradient_setup(small_scene_dir / "scene.toml", W, [0.0, 0.1, 0.3], [0.0, 0.05, 0.0], 60, 2)
 
 
 def _rays(n=1000, seed=0):

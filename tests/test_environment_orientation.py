@@ -11,12 +11,10 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from abs.camera.pinhole import intrinsics_from_fov, look_at
 from abs.errors import SceneError
-from abs.render import Camera, compile_scene
 from abs.render.environment import Environment, _rotation_y
 from abs.scene import load_scene, write_scene
-from gradcheck import assert_gradients_agree, directional_gradient
+from gradcheck import assert_gradients_agree, directional_gradient, gradient_setup
 
 W = H = 32
 
@@ -80,11 +78,7 @@ def test_orientation_turns_the_map_by_its_rotation_vector():
 
 @pytest.fixture(scope="module")
 def setup(small_scene_dir):
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(W, H, np.radians(30)), R, t, W, H)
-    weights = mi.TensorXf(np.random.default_rng(0).uniform(0, 1, (H, W, 3)).astype(np.float32))
-    return compiled, camera, weights
+    return gradient_setup(small_scene_dir / "scene.toml", W, [0.0, 0.08, 0.32], [0.0, 0.05, 0.0], 30, 0)
 
 
 @pytest.mark.parametrize("value, direction, mode", [
