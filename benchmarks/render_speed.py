@@ -57,6 +57,14 @@ _CHILD = textwrap.dedent('''
     def reset_peak():  # loading the scene peaks above a render; count from here (Linux >= 4.0)
         with open("/proc/self/clear_refs", "w") as f:
             f.write("5")
+    def gpu_mb():  # the GPU's used memory, MB: Dr.Jit keeps freed blocks, so after a render it is
+        # that render's high-water mark (the benchmark's process is the GPU's only user)
+        if not mi.variant().startswith("cuda"):
+            return None
+        import subprocess
+        out = subprocess.run(["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
+                             capture_output=True, text=True, check=True).stdout
+        return float(out.split()[0])
     out = {}
     if task == "abs_first":
         start = time.perf_counter(); compiled.render(camera, spp=spp).numpy()
@@ -67,13 +75,16 @@ _CHILD = textwrap.dedent('''
         start = time.perf_counter(); np.array(mi.render(scene, spp=spp))
         out["seconds"] = time.perf_counter() - start
     else:  # memory of a derivative render, above the compiled scene's footprint
+        dr.flush_malloc_cache()
         reset_peak()
-        base = rss()
+        base, gpu_base = rss(), gpu_mb()
         if task == "gradient":
             compiled.render_backward(camera, np.ones((height, width, 3)), ["glass.absorption"], spp=spp)
         else:
             compiled.render_forward(camera, {"glass.absorption": [1.0, 0.0, 0.0]}, spp=spp)
         out["base_mb"], out["peak_mb"] = base, rss()
+        if gpu_base is not None:
+            out["gpu_growth_mb"] = gpu_mb() - gpu_base
     print(json.dumps(out))
 ''')
 
@@ -262,12 +273,16 @@ def main() -> None:
             m = _child(task, DEFAULT_SCENE, 640, 480, n)
             memory.append({"task": task, "spp": n, "width": 640, "height": 480,
                            "footprint_mb": m["base_mb"], "peak_mb": m["peak_mb"],
-                           "growth_mb": m["peak_mb"] - m["base_mb"]})
+                           "growth_mb": m["peak_mb"] - m["base_mb"],
+                           "gpu_growth_mb": m.get("gpu_growth_mb")})
+            gpu = f", GPU +{m['gpu_growth_mb']:.0f} MB" if "gpu_growth_mb" in m else ""
             print(f"memory {task:15s} 640x480 {n:4d} spp: +{m['peak_mb'] - m['base_mb']:.0f} MB "
-                  f"(footprint {m['base_mb']:.0f} MB)", flush=True)
+                  f"(footprint {m['base_mb']:.0f} MB){gpu}", flush=True)
     record["memory"] = memory
-    # Host memory only: on a CUDA variant the images live on the GPU, which this does not measure.
-    record["memory_kind"] = "peak resident memory above the compiled scene's, MB"
+    # On a CUDA variant the loop state lives on the GPU: gpu_growth_mb is the GPU's used memory
+    # after the render above its use after compiling the scene (Dr.Jit's allocation cache emptied).
+    record["memory_kind"] = ("peak resident memory above the compiled scene's, MB; "
+                             "gpu_growth_mb: GPU memory in use after the render above before it")
     record["gpu"] = mi.variant() if mi.variant().startswith("cuda") else \
         "not measured: no CUDA device was available to this run"
 
@@ -299,6 +314,9 @@ def markdown_table(record: dict) -> list[str]:
         m = {r["spp"]: r for r in record["memory"] if r["task"] == task}
         cells = ", ".join(f"{n} spp +{m[n]['growth_mb']:.0f} MB" for n in sorted(m))
         rows.append(f"| memory of a {task.replace('_', ' ')}, 640x480 | flat in spp | {cells} |")
+        if all(m[n].get("gpu_growth_mb") is not None for n in m):
+            cells = ", ".join(f"{n} spp +{m[n]['gpu_growth_mb']:.0f} MB" for n in sorted(m))
+            rows.append(f"| GPU memory of a {task.replace('_', ' ')}, 640x480 | flat in spp | {cells} |")
     return rows
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+import pytest
 
 from abs.camera.pinhole import intrinsics_from_fov, look_at
 from abs.render import Camera, compile_scene
@@ -59,12 +60,10 @@ def test_pose_gradient_renders_reuse_kernels(silhouette_scene_dir):
 def test_large_seeds_are_wrapped_for_batched_renders(silhouette_scene_dir, monkeypatch):
     # A batched render derives its seeds as seed x 7919 + batch; for call seeds above ~540 000
     # that exceeds the 32 bits a Mitsuba sampler takes (it raised a TypeError).
-    import abs.render.compiled as compiled_module
-
     compiled = compile_scene(load_scene(silhouette_scene_dir / "scene.toml"))
     R, t = look_at(np.array([0.0, 0.05, 0.35]), np.array([0.0, 0.05, 0.0]))
     camera = Camera(intrinsics_from_fov(16, 16, np.radians(25)), R, t, 16, 16)
-    monkeypatch.setattr(compiled_module, "MAX_SAMPLES_IN_FLIGHT", 16 * 16 * 2)  # 2 spp per batch
+    monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", str(16 * 16 * 2))  # 2 spp per batch
     big = compiled.render(camera, spp=4, seed=10**6).numpy()
     other = compiled.render(camera, spp=4, seed=10**6 + 1).numpy()
     assert np.isfinite(big).all() and big.mean() > 0
@@ -143,13 +142,11 @@ def test_brdf_pca_renders_reuse_kernels(silhouette_scene_dir, tmp_path):
 def test_derivative_renders_bound_the_samples_in_flight(small_scene_dir, monkeypatch):
     """Forward mode and path replay keep no recorded graph: their memory is the path loop's state
     for the samples in flight, which CompiledScene bounds whatever the spp."""
-    import abs.render.compiled as compiled_module
-
     compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
     R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
     camera = Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
     cap = 16 * 12 * 2
-    monkeypatch.setattr(compiled_module, "MAX_SAMPLES_IN_FLIGHT", cap)
+    monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", str(cap))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
         dr.kernel_history()
@@ -161,3 +158,17 @@ def test_derivative_renders_bound_the_samples_in_flight(small_scene_dir, monkeyp
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert sizes and max(sizes) <= cap, max(sizes)
+
+
+def test_samples_in_flight_follows_the_backend_and_the_override(monkeypatch):
+    from abs.render.compiled import SAMPLES_IN_FLIGHT, samples_in_flight
+
+    monkeypatch.delenv("ABS_SAMPLES_IN_FLIGHT", raising=False)
+    backend = "cuda" if mi.variant().startswith("cuda") else "llvm"
+    assert samples_in_flight() == SAMPLES_IN_FLIGHT[backend]
+    monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", "4096")
+    assert samples_in_flight() == 4096
+    for bad in ("0", "-3", "many"):
+        monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", bad)
+        with pytest.raises(ValueError, match="ABS_SAMPLES_IN_FLIGHT"):
+            samples_in_flight()
