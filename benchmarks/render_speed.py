@@ -121,6 +121,13 @@ def _child(task: str, scene: Path, width: int, height: int, spp: int) -> dict:
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
+def _gpu_name() -> str:
+    """The CUDA device's name and driver, as nvidia-smi reports them."""
+    out = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version", "--format=csv,noheader"],
+                         capture_output=True, text=True)
+    return out.stdout.strip() or "a CUDA device (nvidia-smi did not answer)"
+
+
 def _time(fn, repeats: int = 3) -> float:
     fn()  # compile
     times = []
@@ -283,7 +290,7 @@ def main() -> None:
     # after the render above its use after compiling the scene (Dr.Jit's allocation cache emptied).
     record["memory_kind"] = ("peak resident memory above the compiled scene's, MB; "
                              "gpu_growth_mb: GPU memory in use after the render above before it")
-    record["gpu"] = mi.variant() if mi.variant().startswith("cuda") else \
+    record["gpu"] = _gpu_name() if mi.variant().startswith("cuda") else \
         "not measured: no CUDA device was available to this run"
 
     out = ROOT / "benchmarks/results"
