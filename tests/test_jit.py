@@ -172,3 +172,49 @@ def test_samples_in_flight_follows_the_backend_and_the_override(monkeypatch):
         monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", bad)
         with pytest.raises(ValueError, match="ABS_SAMPLES_IN_FLIGHT"):
             samples_in_flight()
+
+
+def test_batched_gradient_with_a_linear_sensor_renders_no_extra_image(small_scene_dir, monkeypatch):
+    """A linear sensor's adjoint is the same at every image, so a batched gradient takes the image
+    from its batches' own primal renders: the same image and gradient as when it first renders
+    the whole image (the path a non-linear sensor needs), with one path-tracing pass fewer per
+    batch."""
+    import abs.render.sensor as sensor_module
+
+    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    camera = Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
+    monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", str(16 * 12 * 2))  # 2 spp per batch
+    weight = np.random.default_rng(3).uniform(-1.0, 1.0, (12, 16, 3))
+    names = ["glass.absorption", "environment.scale"]
+    assert compiled.sensor.is_linear()
+
+    def traced(fn):
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            dr.kernel_history()
+            out = fn()
+            passes = sum(1 for k in dr.kernel_history() if k.get("operation_count", 0) > 500)
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        return out, passes
+
+    (image, gradient), fast = traced(lambda: compiled.render_backward(camera, weight, names, spp=8, seed=2))
+    monkeypatch.setattr(sensor_module.Sensor, "is_linear", lambda self: False)
+    (image_ref, gradient_ref), slow = traced(lambda: compiled.render_backward(camera, weight, names, spp=8, seed=2))
+    np.testing.assert_array_equal(image, image_ref)
+    np.testing.assert_array_equal(image, compiled.render(camera, spp=8, seed=2).numpy())
+    for name in names:
+        np.testing.assert_allclose(gradient[name], gradient_ref[name], rtol=1e-5)
+        assert np.all(gradient[name] != 0.0)
+    assert fast < slow, (fast, slow)
+
+
+def test_a_sensor_is_linear_only_at_unit_response_and_without_its_own_gradients():
+    from abs.render.sensor import Sensor
+
+    assert Sensor([0.1, 0.0], [1.0, 1.0, 1.0], [0.01, 0.0, 0.0], np.eye(3).ravel() * 1.1).is_linear()
+    assert not Sensor([0.0, 0.0], [1.0, 0.9, 1.0], [0.0] * 3).is_linear()
+    sensor = Sensor([0.0, 0.0], [1.0, 1.0, 1.0], [0.0] * 3)
+    dr.enable_grad(sensor.vignetting)
+    assert not sensor.is_linear()

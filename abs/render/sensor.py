@@ -96,6 +96,16 @@ class Sensor:
         matrix = np.eye(3).ravel() if colour_matrix is None else colour_matrix
         self.colour_matrix = opaque(mi.Float, np.asarray(matrix, np.float32).ravel())
 
+    def is_linear(self) -> bool:
+        """Whether the output is affine in the radiance with a fixed derivative: the response is 1
+        in every channel and no sensor parameter has gradients enabled. The adjoint of
+        :meth:`apply` is then the same at every image (what lets a batched gradient skip
+        rendering the whole image first, :meth:`CompiledScene.render_backward`)."""
+        arrays = (self.vignetting, self.response, self.stray_light, self.colour_matrix)
+        if any(dr.grad_enabled(a) for a in arrays):
+            return False
+        return bool(np.all(self.response.numpy() == 1.0))
+
     def apply(self, image: mi.TensorXf, camera: Camera) -> mi.TensorXf:
         """The sensor's output for rendered radiance ``image`` (height, width, 3) of ``camera``."""
         h, w = camera.height, camera.width
