@@ -109,13 +109,15 @@ def _metrics(observations, renders) -> dict[str, float]:
 
 def _free_scan(objective: Objective, theta: np.ndarray) -> dict | None:
     """The seeds' per-channel scan of a fitted glass absorption around the fit, in ``scan.json``'s
-    format: free when the fit renders from path-length recordings (every point reweights the
-    recordings of Levenberg-Marquardt's first seed)."""
+    format, when the absorption reweights from path-length recordings: every point reweights the
+    recordings of Levenberg-Marquardt's first seed (at the fitted IOR and pose, when those were
+    fitted too: a scan of the absorption given them)."""
     vector, compiled = objective.vector, objective.model.compiled
     slices = vector.slices()
+    reweightable = objective.problem().reweightable
     for name in vector.names:
         spec = compiled.specs[name]
-        if spec.reweighting != "absorption" or name in vector.tied:
+        if spec.reweighting != "absorption" or name in vector.tied or name not in reweightable:
             continue
         s = slices[name]
         grids = [default_grid(spec, v, 15) if v > spec.lower else np.linspace(0.0, 1.0, 15)
@@ -192,7 +194,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     state = optimiser.run(objective, state, settings, iteration_done)
 
     theta = vector.to_physical(state.z)
-    scans = _free_scan(objective, theta) if objective.reweighted else None
+    scans = _free_scan(objective, theta)
     after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from renders independent of each other (the Jacobian's own
     # noise): fresh ones, or, from recordings, those of the refinement's seed pairs (the optimum

@@ -72,6 +72,18 @@ class Objective:
         return self.problem().uses_recordings
 
     @property
+    def free(self) -> np.ndarray:
+        """Indices of the scalars whose new values render nothing at the other scalars' values
+        (:attr:`abs.model.FitProblem.reweightable`) when some others do need renders (an IOR, a
+        pose): Levenberg-Marquardt refits them between renders. Empty otherwise."""
+        problem = self.problem()
+        if problem.uses_recordings or not problem.reweightable:
+            return np.zeros(0, int)
+        slices = self.vector.slices()
+        return np.concatenate([np.arange(slices[n].start, slices[n].stop)
+                               for n in problem.reweightable])
+
+    @property
     def has_prior(self) -> np.ndarray:
         """Which scalars have a prior (bool, shape (P,))."""
         return np.isfinite(self.prior_sd)
@@ -90,7 +102,7 @@ class Objective:
         return J
 
     def residuals(self, z: np.ndarray, seed: int, jacobian_seed: int | None = None,
-                  factor: int | None = None):
+                  factor: int | None = None, names=None):
         """Weighted residuals at ``z`` and their Jacobian w.r.t. ``z``.
 
         Parameters
@@ -103,6 +115,8 @@ class Objective:
         factor : int, optional
             Compare at this downsampling factor instead of the settings' ``downsample`` (a
             coarse stage of Levenberg-Marquardt).
+        names : sequence of str, optional
+            Only these parameters' Jacobian columns (the others are zero).
 
         Returns
         -------
@@ -113,7 +127,8 @@ class Objective:
         """
         vector, s = self.vector, self.settings
         theta, dtheta = vector.to_physical(z), vector.derivative(z)
-        r, J = self.problem(factor).residuals(theta, s.spp, seed, jacobian=True, jacobian_seed=jacobian_seed)
+        r, J = self.problem(factor).residuals(theta, s.spp, seed, jacobian=True,
+                                              jacobian_seed=jacobian_seed, names=names)
         loss = float(np.sqrt(np.mean(r ** 2)))
         r = r / self.sigma
         if self.has_prior.any():

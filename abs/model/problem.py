@@ -26,7 +26,10 @@ When every varying parameter reweights from a path-length recording (a glass abs
 environment scale, the sensor: :attr:`FitProblem.uses_recordings`), each ``(view, spp, seed)`` is
 rendered once, as a recording (:mod:`abs.render.path_lengths`), and every render and Jacobian at
 that seed reweights it: the same samples as the render it stands for, so nothing above changes
-but the cost.
+but the cost. When only some do (:attr:`FitProblem.reweightable`, beside an IOR or a pose), each
+render is a recording at the other parameters' values, and the reweightable parameters' Jacobian
+columns and any value of them at those values come from it without rendering: what lets a fit
+refit them between renders (:func:`abs.fitting.optimisers.lm.levenberg_marquardt`'s ``refit``).
 """
 
 from __future__ import annotations
@@ -76,8 +79,8 @@ class FitProblem:
     counter : RenderCounter
         Where renders are counted (shared by the problems of one model).
     reweight : bool
-        Use path-length recordings (:mod:`abs.render.path_lengths`) when every fitted parameter
-        reweights from one (:attr:`uses_recordings`).
+        Use path-length recordings (:mod:`abs.render.path_lengths`) when some fitted parameter
+        reweights from one (:attr:`reweightable`).
     """
 
     compiled: CompiledScene
@@ -107,14 +110,23 @@ class FitProblem:
         return owners[0] if owners else None
 
     @property
+    def reweightable(self) -> list[str]:
+        """The fitted parameters whose values a path-length recording gives without a render (an
+        absorption of one glass material, the environment's scale, a sensor parameter), in the
+        vector's order; empty when recordings are off or several glasses' absorptions are fitted.
+        Renders are recordings whenever this is not empty."""
+        if not self.reweight or len(self._absorption_owners()) > 1:
+            return []
+        others = set(self.compiled.needs_render(self.vector.names, self.recorded_material))
+        return [n for n in self.vector.names if n not in others]
+
+    @property
     def uses_recordings(self) -> bool:
-        """Whether every render of this problem comes from path-length recordings: when each
-        fitted parameter is an absorption of one glass material, the environment's scale or a
-        sensor parameter. Then a render at another value of them is a reweighting, and only a new
-        seed (or spp) renders: a fit's Jacobians, line searches and a sampler's likelihood
-        evaluations render nothing."""
-        return (self.reweight and len(self._absorption_owners()) <= 1
-                and not self.compiled.needs_render(self.vector.names, self.recorded_material))
+        """Whether every fitted parameter is :attr:`reweightable`. Then a render at another value
+        of them is a reweighting, and only a new seed (or spp) renders: a fit's Jacobians, line
+        searches and a sampler's likelihood evaluations render nothing."""
+        reweightable = self.reweightable
+        return bool(reweightable) and len(reweightable) == len(self.vector.names)
 
     def _fingerprint(self) -> str:
         """A digest of every compiled value a recording depends on (those it cannot reweight),
@@ -152,7 +164,7 @@ class FitProblem:
     def render(self, observation: Observation, theta: np.ndarray, spp: int, seed: int) -> np.ndarray:
         """Primal rendering (H, W, 3) of one observation at ``theta``."""
         self.set_values(theta)
-        if self.uses_recordings:
+        if self.reweightable:
             recording = self._recording(observation, spp, seed)
             with dr.suspend_grad():
                 image = self.compiled.render_recorded(recording, observation.camera).numpy()
@@ -177,13 +189,14 @@ class FitProblem:
         return (clamped - observation.photograph)[m].ravel(), live[m].ravel()
 
     def residuals(self, theta: np.ndarray, spp: int, seed: int, jacobian: bool = False,
-                  jacobian_seed: int | None = None):
+                  jacobian_seed: int | None = None, names=None):
         """Residual vector at physical ``theta`` and, optionally, its Jacobian.
 
         With ``jacobian_seed`` (different from ``seed``) the Jacobian comes from an independent
         render. Residuals and Jacobian from the same render are correlated through the Monte-Carlo
         noise, which biases ``J^T r`` (the gradient) towards darker, less noisy renderings;
-        independent renders make ``J^T r`` unbiased.
+        independent renders make ``J^T r`` unbiased. ``names`` restricts the Jacobian to those
+        parameters' columns (the others are zero).
 
         Returns
         -------
@@ -199,7 +212,8 @@ class FitProblem:
                 rs.append(r)
                 continue
             image, jac = self._render_with_jacobian(
-                obs, theta, spp, view_seed if jacobian_seed is None else _view_seed(jacobian_seed, k))
+                obs, theta, spp, view_seed if jacobian_seed is None else _view_seed(jacobian_seed, k),
+                names)
             if jacobian_seed is not None and jacobian_seed != seed:
                 image = self.render(obs, theta, spp, view_seed)
             r, live = self._compare(obs, image)
@@ -207,7 +221,7 @@ class FitProblem:
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(rs), (np.concatenate(js) if jacobian else None)
 
-    def jacobian(self, theta: np.ndarray, spp: int, seed: int) -> np.ndarray:
+    def jacobian(self, theta: np.ndarray, spp: int, seed: int, names=None) -> np.ndarray:
         """The Jacobian (M, P) alone, from renders seeded ``seed`` (as :meth:`residuals` would
         seed them); the clamp mask comes from the same renders.
 
@@ -218,7 +232,7 @@ class FitProblem:
         """
         js = []
         for k, obs in enumerate(self.observations):
-            image, jac = self._render_with_jacobian(obs, theta, spp, _view_seed(seed, k))
+            image, jac = self._render_with_jacobian(obs, theta, spp, _view_seed(seed, k), names)
             live = self._clamp(image)[1][obs.mask].ravel()
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(js)
@@ -248,18 +262,24 @@ class FitProblem:
                 passes.append((tangent, [(i, None)]))
         return passes
 
-    def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int):
+    def _render_with_jacobian(self, obs: Observation, theta, spp: int, seed: int, names=None):
         cam, p = obs.camera, self.vector.size
         self.set_values(theta)
-        recording = self._recording(obs, spp, seed) if self.uses_recordings else None
+        reweightable = self.reweightable
+        recording = self._recording(obs, spp, seed) if reweightable else None
         image, jac = None, np.zeros((cam.height, cam.width, 3, p))
-        for tangent, columns in self.column_passes():
+        if recording is not None:  # the image every column's pass stands for
+            with dr.suspend_grad():
+                image = self.compiled.render_recorded(recording, cam).numpy().astype(np.float64)
+        for tangent, columns in self.column_passes(names):
             # Every pass renders with the same seed (the same samples), and every fitted
             # parameter is given a tangent (zero where not wanted), so that every column is
             # rendered alike (e.g. dispersive glass splits its paths in each).
             tangents = self.vector.tangents(tangent)
-            if recording is not None:
-                rendered, derivative = self.compiled.render_recorded_forward(recording, cam, tangents)
+            moved = {n for n, t in tangents.items() if np.any(np.asarray(t) != 0)}
+            if recording is not None and moved <= set(reweightable):
+                rendered, derivative = self.compiled.render_recorded_forward(
+                    recording, cam, {n: tangents[n] for n in reweightable})
             else:
                 rendered, derivative = self.compiled.render_forward(
                     cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth)
@@ -273,6 +293,8 @@ class FitProblem:
                     jac[..., i] = derivative
                 else:
                     jac[..., channel, i] = derivative[..., channel]
+        if image is None:  # no column asked for
+            image = self.render(obs, theta, spp, seed)
         return image, jac
 
     def gradient(self, theta: np.ndarray, spp: int, seed: int,

@@ -29,8 +29,8 @@ import numpy as np
 from abs.fitting.optimisers import Callback, Optimiser, OptimizerState, register
 
 __all__ = ["LevenbergMarquardt", "LMState", "RefinementState", "levenberg_marquardt",
-           "gauss_newton_refinement", "recording_pairs", "pair_seeds", "cross_curvature", "column_scale",
-           "averaged_refinement_points", "lm_stages"]
+           "gauss_newton_refinement", "recording_pairs", "free_refit", "pair_seeds", "cross_curvature",
+           "column_scale", "averaged_refinement_points", "lm_stages"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -121,12 +121,16 @@ class LevenbergMarquardt(Optimiser):
         solver = state.solver or LMState()
         # A resumed fit continues Levenberg-Marquardt unless it converged or refinement began.
         if not solver.converged and not solver.refinement.points:
+            free = objective.free.size > 0
             for factor, end in lm_stages(settings):
                 if state.iteration >= end:
                     continue
                 state = levenberg_marquardt(
                     lambda z, iteration, f=factor: _two_renders(objective, z, settings.seed, f),
-                    state, end, settings.rtol, settings.atol, on_iteration)
+                    state, end, settings.rtol, settings.atol, on_iteration,
+                    refit=(lambda z, f=factor: free_refit(objective, z, settings.seed, f,
+                                                          settings.rtol, settings.atol))
+                    if free else None)
                 if end < settings.max_iterations:
                     state.solver = replace(state.solver, converged=None)  # a coarse stage
             if state.solver is not None and state.solver.converged and on_iteration is not None:
@@ -232,12 +236,43 @@ def pair_seeds(seed: int, pair: int) -> tuple[int, int]:
     return base, base + 7
 
 
-def _two_renders(objective, z, seed: int, factor: int):
+def _two_renders(objective, z, seed: int, factor: int, names=None):
     """Residuals and Jacobians of the two renders of the pair starting at ``seed``
-    (:func:`pair_seeds`), and their mean RMSE."""
-    ra, Ja, la = objective.residuals(z, seed, factor=factor)
-    rb, Jb, lb = objective.residuals(z, seed + 7, factor=factor)
+    (:func:`pair_seeds`), and their mean RMSE; ``names`` restricts the Jacobians' columns."""
+    ra, Ja, la = objective.residuals(z, seed, factor=factor, names=names)
+    rb, Jb, lb = objective.residuals(z, seed + 7, factor=factor, names=names)
     return (ra, Ja), (rb, Jb), 0.5 * (la + lb)
+
+
+#: Evaluations of one refit of the free scalars (:func:`free_refit`); each renders nothing.
+FREE_REFIT_ITERATIONS = 20
+
+
+def free_refit(objective, z: np.ndarray, seed: int, factor: int, rtol: float = 1e-4,
+               atol: float = 1e-6) -> np.ndarray:
+    """``z`` with its free scalars (:attr:`Objective.free`: absorption, environment scale, sensor)
+    moved to the minimum of the two-seed objective over them, the others (IOR, pose) held.
+
+    Those scalars reweight the path-length recordings made at the others' values, so this
+    renders nothing beyond the two recordings per view that evaluating the objective at ``z``
+    needs anyway: Levenberg-Marquardt then works on the profile of the objective over the
+    parameters that move paths (variable projection), and the reweightable parameters no longer
+    cost an outer iteration's renders to settle after every change of the IOR.
+    """
+    free = objective.free
+    names = objective.problem(factor).reweightable
+
+    def evaluate(z_free, iteration):
+        point = np.array(z, np.float64)
+        point[free] = z_free
+        (ra, Ja), (rb, Jb), loss = _two_renders(objective, point, seed, factor, names)
+        return (ra, Ja[:, free]), (rb, Jb[:, free]), loss
+
+    inner = levenberg_marquardt(evaluate, OptimizerState("lm", 0, np.array(z, np.float64)[free]),
+                                FREE_REFIT_ITERATIONS, rtol, atol)
+    out = np.array(z, np.float64)
+    out[free] = inner.z
+    return out
 
 
 def lm_stages(settings) -> list[tuple[int, int]]:
@@ -268,7 +303,8 @@ MAX_STEP = 2.0
 
 def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
                         state: OptimizerState, max_iterations: int, rtol: float = 1e-4,
-                        atol: float = 1e-6, on_iteration: Callback | None = None) -> OptimizerState:
+                        atol: float = 1e-6, on_iteration: Callback | None = None,
+                        refit: Callable[[np.ndarray], np.ndarray] | None = None) -> OptimizerState:
     """Levenberg-Marquardt on the two-seed objective ``f(z) = r_A(z) . r_B(z) / 2``.
 
     ``r_A`` and ``r_B`` are the weighted residuals of two renders with different, fixed seeds
@@ -302,21 +338,27 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
         Last evaluation (counted in ``state.iteration``; each trial point is one).
     rtol, atol : float
         Stop when every coordinate of a step is below ``atol + rtol |z|`` (typical steps).
+    refit : callable, optional
+        ``refit(z) -> z``, applied to every point before it is evaluated (:func:`free_refit`:
+        the scalars that render nothing moved to their best values at the point's others); a
+        trial is judged by the objective at the refitted point.
     """
     if state.iteration >= max_iterations:
         return state
     z = np.array(state.z, np.float64)
 
     def at(point):
+        if refit is not None:
+            point = refit(point)
         state.iteration += 1
         (ra, Ja), (rb, Jb), loss = evaluate(point, state.iteration)
         f = 0.5 * float(ra @ rb)
         g = 0.5 * (Ja.T @ rb + Jb.T @ ra)
         state.history.append({"iteration": state.iteration, "loss": float(loss), "objective": f,
                               "z": list(map(float, point))})
-        return f, g, (cross_curvature(Ja, Jb), column_scale(Ja, Jb))
+        return f, g, (cross_curvature(Ja, Jb), column_scale(Ja, Jb)), point
 
-    f, g, (H, scale) = at(z)
+    f, g, (H, scale), z = at(z)
     state.z = z
     if on_iteration is not None:
         on_iteration(state)
@@ -334,10 +376,10 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
             converged = True
             break
         predicted = -float(g @ step + 0.5 * step @ H @ step)
-        f_trial, g_trial, curvature_trial = at(z + step)
+        f_trial, g_trial, curvature_trial, trial = at(z + step)
         ratio = (f - f_trial) / predicted if predicted > 0 else -np.inf
         if ratio > 1e-3:
-            z, f, g, (H, scale) = z + step, f_trial, g_trial, curvature_trial
+            z, f, g, (H, scale) = trial, f_trial, g_trial, curvature_trial
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
             growth = 2.0
         else:
