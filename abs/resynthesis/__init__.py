@@ -16,8 +16,10 @@ docs/editing.md, "Analysis by synthesis".
 """
 
 from abs.editing.edit import edit, register_method
-from abs.resynthesis.method import SynthesisSettings, composite, synthesis_edit
+from abs.resynthesis.method import (FittedScene, SynthesisSettings, composite, edit_fitted,
+                                    fit_photograph, render_material, synthesis_edit)
 
 register_method("synthesis", synthesis_edit)
 
-__all__ = ["edit", "SynthesisSettings", "synthesis_edit", "composite"]
+__all__ = ["edit", "SynthesisSettings", "FittedScene", "fit_photograph", "render_material",
+           "edit_fitted", "synthesis_edit", "composite"]

@@ -7,8 +7,8 @@ A target is made from the fitted current material where the spec leaves a quanti
 ============================  ====================================================================
 spec                          target material (scene-file table)
 ============================  ====================================================================
-``glossier``                  the fitted plastic, roughness / :data:`GLOSS_FACTOR`
-``diffuse``                   the fitted plastic, roughness x :data:`GLOSS_FACTOR` (at most 1)
+``glossier``                  the fitted plastic, roughness / :data:`GLOSSIER_FACTOR`
+``diffuse``                   the fitted plastic, roughness x :data:`DIFFUSE_FACTOR` (at most 1)
 ``merl:NAME``                 the measured table NAME (``merl``)
 ``glass:clear``               smooth ``dielectric``, IOR :data:`GLASS_IOR`
 ``glass:frosted``             ``dielectric`` of Beckmann roughness :data:`FROSTED_ROUGHNESS`
@@ -35,11 +35,13 @@ import numpy as np
 from abs.editing.spec import MaterialSpec
 from abs.errors import InputError
 
-__all__ = ["GLOSS_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS", "TRANSLUCENT_ROUGHNESS",
+__all__ = ["GLOSSIER_FACTOR", "DIFFUSE_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS", "TRANSLUCENT_ROUGHNESS",
            "DARK_TRANSMITTANCE", "current_material", "target_material", "TRANSMISSIVE"]
 
-GLOSS_FACTOR = 5.0
-"""Roughness divided (``glossier``) or multiplied (``diffuse``) by this."""
+GLOSSIER_FACTOR = 5.0
+"""``glossier`` divides the roughness by this."""
+DIFFUSE_FACTOR = 4.0
+"""``diffuse`` multiplies the roughness by this."""
 GLASS_IOR = 1.5
 FROSTED_ROUGHNESS = 0.15
 TRANSLUCENT_ROUGHNESS = 0.6
@@ -80,7 +82,8 @@ def target_material(spec: MaterialSpec, reflectance, roughness: float, diameter_
     """
     rho = np.clip(np.asarray(reflectance, np.float64), 1e-4, 1.0)
     if spec.kind in ("glossier", "diffuse"):
-        r = roughness / GLOSS_FACTOR if spec.kind == "glossier" else min(roughness * GLOSS_FACTOR, 1.0)
+        r = (roughness / GLOSSIER_FACTOR if spec.kind == "glossier"
+             else min(roughness * DIFFUSE_FACTOR, 1.0))
         return current_material(rho, r)
     if spec.kind == "merl":
         from abs.brdf.measured import measured_material_names, measured_table

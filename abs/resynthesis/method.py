@@ -33,19 +33,22 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from abs.colour.srgb import luminance
 from abs.editing.edit import EditResult, EditSettings, Estimates
 from abs.editing.spec import MaterialSpec
 from abs.errors import InputError
-from abs.resynthesis.backdrop import environment_with_backdrop
+from abs.resynthesis.backdrop import environment_with_backdrop, frustum_texels
 from abs.resynthesis.inflation import inflated_mesh
+from abs.resynthesis.lighting import hat_averages, hat_basis, map_from_gains, solve_gains
 from abs.resynthesis.materials import TRANSMISSIVE, current_material, target_material
 from abs.resynthesis.studio import (photo_camera, write_capture, write_environment, write_mesh,
                                     write_scene_file)
 
-__all__ = ["SynthesisSettings", "synthesis_edit", "composite"]
+__all__ = ["SynthesisSettings", "FittedScene", "fit_photograph", "render_material", "edit_fitted",
+           "synthesis_edit", "composite"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,13 @@ class SynthesisSettings:
         The fit's Levenberg-Marquardt evaluations and Gauss-Newton refinement steps.
     max_depth : int
         Path segments (glass needs several).
+    light_grid : tuple of int
+        ``(n_theta, n_phi)`` nodes of the smooth map fitted to the unseen light
+        (:mod:`~abs.resynthesis.lighting`); ``(0, 0)``: keep the baseline's map, scaled.
+    light_spp : int
+        Samples per pixel of each basis rendering of that fit.
+    light_ridge : float
+        Its pull towards the baseline's map (:func:`~abs.resynthesis.lighting.solve_gains`).
     seed : int
         Seed of the renders.
     folder : str or None
@@ -89,6 +99,9 @@ class SynthesisSettings:
     max_iterations: int = 8
     refinement_steps: int = 2
     max_depth: int = 12
+    light_grid: tuple[int, int] = (7, 8)
+    light_spp: int = 16
+    light_ridge: float = 1e-3
     seed: int = 0
     folder: str | None = None
 
@@ -99,6 +112,39 @@ def _initial_reflectance(rgb: np.ndarray, mask: np.ndarray, environment: np.ndar
     # the bounds and near the scale the environment asks for.
     ratio = rgb[mask].mean(axis=0) / np.maximum(environment.reshape(-1, 3).mean(axis=0), 1e-9)
     return np.clip(ratio, 0.02, 0.95)
+
+
+def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
+                  fitted_env: np.ndarray, seen: np.ndarray, trust: dict,
+                  syn: SynthesisSettings) -> np.ndarray:
+    """The unseen light as a smooth map (:mod:`~abs.resynthesis.lighting`), full resolution."""
+    from abs.render import Camera, compile_scene
+    from abs.render.environment import Environment
+    from abs.scene import load_scene
+
+    n_theta, n_phi = syn.light_grid
+    small = 64  # the hats are smooth: their renderings need no finer map
+    basis = hat_basis(small, n_theta, n_phi)
+    unseen_small = ~frustum_texels(view["K"], mask.shape, small)
+    path = write_scene_file(folder, "lighting.toml",
+                            current_material(trust["reflectance"], trust["roughness"]),
+                            syn.light_spp, syn.max_depth)
+    compiled = compile_scene(load_scene(path))
+    camera = Camera(view["K"], view["R"], view["t"], mask.shape[1], mask.shape[0])
+
+    def lit_by(latlong: np.ndarray) -> np.ndarray:
+        compiled.environment = Environment(latlong)
+        return np.asarray(compiled.render(camera, syn.light_spp, seed=syn.seed + 11).numpy())[mask]
+
+    fixed = lit_by(np.where(seen[..., None], fitted_env, 0.0))
+    responses = np.stack([lit_by(np.repeat((b * unseen_small)[..., None], 3, axis=2))
+                          for b in basis])
+    small_env = cv2.resize(np.ascontiguousarray(fitted_env), (2 * small, small),
+                           interpolation=cv2.INTER_AREA)
+    prior = hat_averages(small_env, basis, unseen_small)
+    gains = solve_gains(rgb[mask], fixed, responses, prior, syn.light_ridge)
+    trust["lighting"] = {"grid": [n_theta, n_phi], "prior": prior.tolist(), "gains": gains.tolist()}
+    return map_from_gains(gains, fitted_env.shape[0], n_theta, n_phi)
 
 
 def composite(photo: np.ndarray, mask: np.ndarray, new: np.ndarray, current: np.ndarray,
@@ -119,7 +165,8 @@ def composite(photo: np.ndarray, mask: np.ndarray, new: np.ndarray, current: np.
     return np.where(mask[..., None], np.maximum(inside, 0.0), photo).astype(np.float32)
 
 
-def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray) -> dict:
+def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray,
+                 candidates: tuple[float, ...]) -> dict:
     """Fit reflectance and environment scale for each candidate roughness; the best fit."""
     from abs.fitting import FitSettings, fit
 
@@ -127,7 +174,7 @@ def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray)
                            refinement_steps=syn.refinement_steps, seed=syn.seed,
                            eval_spp=syn.fit_spp)
     fits = {}
-    for roughness in syn.roughness_candidates:
+    for roughness in candidates:
         scene = write_scene_file(folder, f"fit_{roughness:g}.toml",
                                  current_material(reflectance0, roughness), syn.fit_spp,
                                  syn.max_depth)
@@ -147,6 +194,128 @@ def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray)
             "noise": result.image_noise,
             "candidates": {f"{r:g}": fits[r].metrics["train_rmse"]["after"] for r in fits},
             "checks": list(result.checks)}
+
+
+@dataclass
+class FittedScene:
+    """The photograph explained: everything needed to render the object with another material.
+
+    Attributes
+    ----------
+    view : dict
+        The camera (``name``, ``K``, ``R``, ``t``; :func:`~abs.resynthesis.studio.photo_camera`).
+    shape : tuple of int
+        ``(height, width)`` of the photograph.
+    vertices, faces : np.ndarray
+        The inflated mesh, camera frame, metres.
+    environment : np.ndarray
+        The fitted lat-long map (backdrop as photographed, the rest scaled by the fit).
+    trust : dict
+        The fit: roughness, reflectance and scale with standard errors, residual RMSE, noise,
+        the candidates' residuals, the fit's checks.
+    """
+
+    view: dict
+    shape: tuple[int, int]
+    vertices: np.ndarray
+    faces: np.ndarray
+    environment: np.ndarray
+    trust: dict
+
+    @property
+    def diameter_m(self) -> float:
+        """The mesh's largest extent along a camera axis, metres."""
+        return float(np.ptp(self.vertices, axis=0).max())
+
+
+def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
+                   syn: SynthesisSettings) -> FittedScene:
+    """Steps 1-3 of the module docstring: the scene that explains the photograph.
+
+    Parameters
+    ----------
+    rgb, mask : np.ndarray
+        The checked photograph ``(height, width, 3)`` and matte ``(height, width)``.
+    est : Estimates
+        The baseline's estimates (:func:`abs.editing.edit.estimate`).
+    syn : SynthesisSettings
+    """
+    h, w = mask.shape
+    view = photo_camera((h, w), syn.fov_deg)
+    vertices, faces = inflated_mesh(mask, view["K"], syn.distance_m, syn.relief)
+    environment, seen = environment_with_backdrop(est.environment, est.background, view["K"],
+                                                  syn.map_height)
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        folder = Path(syn.folder) if syn.folder else Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_mesh(folder, vertices, faces, view["R"], view["t"])
+        write_capture(folder / "capture", view, rgb, mask)
+        write_environment(folder, environment)
+        trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment),
+                             syn.roughness_candidates)
+        # The unseen part of the map carries the fitted scale; the backdrop is measured radiance.
+        fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
+        if min(syn.light_grid) > 0:
+            unseen = _fit_lighting(folder, rgb, mask, view, fitted_env, seen, trust, syn)
+            write_environment(folder, np.where(seen[..., None], environment, unseen))
+            first = trust
+            trust = _fit_current(folder, syn, np.asarray(first["reflectance"]),
+                                 (first["roughness"],))
+            trust["first_fit"] = {k: first[k] for k in ("residual_rmse", "scale", "reflectance",
+                                                        "candidates")}
+            trust["lighting"] = first["lighting"]
+            fitted_env = np.where(seen[..., None], environment, unseen * trust["scale"])
+    level = float(np.mean(luminance(rgb)[mask]))
+    trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
+                 relative_residual=trust["residual_rmse"] / max(level, 1e-12),
+                 fov_deg=syn.fov_deg)
+    return FittedScene(view, (h, w), vertices, faces, fitted_env.astype(np.float32), trust)
+
+
+def render_material(fitted: FittedScene, material: dict, syn: SynthesisSettings) -> np.ndarray:
+    """Render the fitted scene with the object of scene-file material ``material``.
+
+    Returns
+    -------
+    np.ndarray
+        ``(height, width, 3)`` float32 linear radiance (``syn.render_spp``, seed ``syn.seed + 7``).
+    """
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    h, w = fitted.shape
+    view = fitted.view
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        folder = Path(tmp)
+        write_mesh(folder, fitted.vertices, fitted.faces, view["R"], view["t"])
+        write_environment(folder, fitted.environment)
+        path = write_scene_file(folder, "scene.toml", material, syn.render_spp, syn.max_depth)
+        image = compile_scene(load_scene(path)).render(
+            Camera(view["K"], view["R"], view["t"], w, h), syn.render_spp, seed=syn.seed + 7)
+        return np.asarray(image.numpy(), np.float32)
+
+
+def edit_fitted(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, fitted: FittedScene,
+                syn: SynthesisSettings, merl_dir: str | None = None) -> np.ndarray:
+    """Steps 4-5: the edited photograph from a fitted scene (module docstring)."""
+    trust = fitted.trust
+    current = render_material(fitted, current_material(trust["reflectance"], trust["roughness"]),
+                              syn)
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        target = target_material(spec, trust["reflectance"], trust["roughness"],
+                                 fitted.diameter_m, Path(tmp), merl_dir)
+        if target.get("type") == "merl":
+            target = {**target, "file": str(Path(tmp) / target["file"])}
+        new = render_material(fitted, target, syn)
+    return composite(rgb, mask, new, current, differential=spec.kind not in TRANSMISSIVE)
+
+
+def _settings(settings: EditSettings) -> SynthesisSettings:
+    syn = settings.synthesis or SynthesisSettings()
+    if not isinstance(syn, SynthesisSettings):
+        raise InputError(None, "settings.synthesis", f"expected SynthesisSettings, got "
+                                                     f"{type(syn).__name__}")
+    return syn
 
 
 def synthesis_edit(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, settings: EditSettings,
@@ -172,47 +341,14 @@ def synthesis_edit(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, settin
     -------
     EditResult
         With ``trust``: the fit (residual RMSE, noise, their ratio, the residual relative to the
-        object's mean radiance, fitted values with standard errors, the candidates' residuals).
+        object's mean luminance, fitted values with standard errors, the candidates' residuals);
+        ``environment`` the fitted map.
     """
-    syn = settings.synthesis or SynthesisSettings()
-    if not isinstance(syn, SynthesisSettings):
-        raise InputError(None, "settings.synthesis", f"expected SynthesisSettings, got "
-                                                     f"{type(syn).__name__}")
-    if spec.kind == "texture":
-        target_material(spec, np.ones(3), 0.1, 1.0, Path("."))  # raises the method's refusal
-    from abs.render import Camera
-    from abs.render import compile_scene
-    from abs.scene import load_scene
-
-    h, w = mask.shape
-    view = photo_camera((h, w), syn.fov_deg)
-    vertices, faces = inflated_mesh(mask, view["K"], syn.distance_m, syn.relief)
-    diameter = float(np.ptp(vertices, axis=0).max())
-    environment, seen = environment_with_backdrop(est.environment, est.background, view["K"],
-                                                  syn.map_height)
-    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
-        folder = Path(syn.folder) if syn.folder else Path(tmp)
-        folder.mkdir(parents=True, exist_ok=True)
-        write_mesh(folder, vertices, faces, view["R"], view["t"])
-        write_capture(folder / "capture", view, rgb, mask)
-        write_environment(folder, environment)
-        trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment))
-        # The unseen part of the map carries the fitted scale; the backdrop is measured radiance.
-        fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
-        camera = Camera(view["K"], view["R"], view["t"], w, h)
-        write_environment(folder, fitted_env)
-        renders = {}
-        for name, material in (("current", current_material(trust["reflectance"], trust["roughness"])),
-                               ("new", target_material(spec, trust["reflectance"], trust["roughness"],
-                                                       diameter, folder, settings.merl_dir))):
-            path = write_scene_file(folder, f"{name}.toml", material, syn.render_spp, syn.max_depth)
-            renders[name] = np.asarray(compile_scene(load_scene(path)).render(
-                camera, syn.render_spp, seed=syn.seed + 7).numpy(), np.float32)
-    image = composite(rgb, mask, renders["new"], renders["current"],
-                      differential=spec.kind not in TRANSMISSIVE)
-    level = float(np.mean(luminance(rgb)[mask]))
-    trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
-                 relative_residual=trust["residual_rmse"] / max(level, 1e-12),
-                 object_diameter_m=diameter, fov_deg=syn.fov_deg)
-    return EditResult(image, spec, mask, est.depth, est.normals, est.background, fitted_env,
-                      est.highlight_threshold, est.highlights, settings, "synthesis", trust)
+    syn = _settings(settings)
+    if spec.kind == "texture":  # refuse before the fit, not after it
+        target_material(spec, np.ones(3), 0.1, 1.0, Path("."))
+    fitted = fit_photograph(rgb, mask, est, syn)
+    image = edit_fitted(rgb, mask, spec, fitted, syn, settings.merl_dir)
+    return EditResult(image, spec, mask, est.depth, est.normals, est.background,
+                      fitted.environment, est.highlight_threshold, est.highlights, settings,
+                      "synthesis", fitted.trust)
