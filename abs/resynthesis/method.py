@@ -35,6 +35,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy import ndimage
 
 from abs.colour.srgb import luminance
 from abs.editing.edit import EditResult, EditSettings, Estimates
@@ -114,6 +115,17 @@ def _initial_reflectance(rgb: np.ndarray, mask: np.ndarray, environment: np.ndar
     return np.clip(ratio, 0.02, 0.95)
 
 
+def fit_mask(mask: np.ndarray) -> np.ndarray:
+    """The pixels the fit compares: the matte less its outline.
+
+    A pixel on the outline is a mix of object and background in the photograph, but wholly
+    object in a rendering of the inflated mesh (whose outline runs along the pixels' edges), so it
+    is left out unless that would leave too few (an object a few pixels wide).
+    """
+    inner = ndimage.binary_erosion(mask)
+    return inner if inner.sum() >= max(16, mask.sum() // 4) else mask
+
+
 def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
                   fitted_env: np.ndarray, seen: np.ndarray, trust: dict,
                   syn: SynthesisSettings) -> np.ndarray:
@@ -123,6 +135,7 @@ def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
     from abs.scene import load_scene
 
     n_theta, n_phi = syn.light_grid
+    inner = fit_mask(mask)
     small = 64  # the hats are smooth: their renderings need no finer map
     basis = hat_basis(small, n_theta, n_phi)
     unseen_small = ~frustum_texels(view["K"], mask.shape, small)
@@ -134,7 +147,7 @@ def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
 
     def lit_by(latlong: np.ndarray) -> np.ndarray:
         compiled.environment = Environment(latlong)
-        return np.asarray(compiled.render(camera, syn.light_spp, seed=syn.seed + 11).numpy())[mask]
+        return np.asarray(compiled.render(camera, syn.light_spp, seed=syn.seed + 11).numpy())[inner]
 
     fixed = lit_by(np.where(seen[..., None], fitted_env, 0.0))
     responses = np.stack([lit_by(np.repeat((b * unseen_small)[..., None], 3, axis=2))
@@ -142,7 +155,7 @@ def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
     small_env = cv2.resize(np.ascontiguousarray(fitted_env), (2 * small, small),
                            interpolation=cv2.INTER_AREA)
     prior = hat_averages(small_env, basis, unseen_small)
-    gains = solve_gains(rgb[mask], fixed, responses, prior, syn.light_ridge)
+    gains = solve_gains(rgb[inner], fixed, responses, prior, syn.light_ridge)
     trust["lighting"] = {"grid": [n_theta, n_phi], "prior": prior.tolist(), "gains": gains.tolist()}
     return map_from_gains(gains, fitted_env.shape[0], n_theta, n_phi)
 
@@ -249,7 +262,7 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
         folder = Path(syn.folder) if syn.folder else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         write_mesh(folder, vertices, faces, view["R"], view["t"])
-        write_capture(folder / "capture", view, rgb, mask)
+        write_capture(folder / "capture", view, rgb, fit_mask(mask))
         write_environment(folder, environment)
         trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment),
                              syn.roughness_candidates)
