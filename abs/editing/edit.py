@@ -111,18 +111,13 @@ class EditSettings:
     synthesis: object | None = None
 
 
-@dataclass
-class EditResult:
-    """An edit and the estimates it was made from (all linear, docs/conventions.md frames).
+@dataclass(frozen=True)
+class Estimates:
+    """What the baseline reads from the photograph, the starting point of every method (linear,
+    docs/conventions.md frames).
 
     Attributes
     ----------
-    image : np.ndarray
-        ``(height, width, 3)`` the edited photograph.
-    material : MaterialSpec
-        The target.
-    mask : np.ndarray
-        ``(height, width)`` bool, the object.
     depth : np.ndarray
         ``(height, width)`` depth towards the viewer, pixels.
     normals : np.ndarray
@@ -135,6 +130,40 @@ class EditResult:
         Luminance above which object pixels are highlights.
     highlights : np.ndarray
         ``(height, width)`` bool, the highlight pixels.
+    gradients : tuple of np.ndarray
+        The reshaped depth gradients ``(g_x, g_y)``.
+    strength : float
+        The warp ``s``, pixels.
+    """
+
+    depth: np.ndarray
+    normals: np.ndarray
+    background: np.ndarray
+    environment: np.ndarray
+    highlight_threshold: float
+    highlights: np.ndarray
+    gradients: tuple[np.ndarray, np.ndarray]
+    strength: float
+
+
+@dataclass
+class EditResult:
+    """An edit and the estimates it was made from.
+
+    ``depth``, ``normals``, ``background``, ``environment``, ``highlight_threshold`` and
+    ``highlights`` are those of :attr:`estimates` (:class:`Estimates`); a method that fits the
+    light hands back its fitted map as ``environment``.
+
+    Attributes
+    ----------
+    image : np.ndarray
+        ``(height, width, 3)`` the edited photograph, linear.
+    material : MaterialSpec
+        The target.
+    mask : np.ndarray
+        ``(height, width)`` bool, the object.
+    estimates : Estimates
+        What the edit was made from.
     settings : EditSettings
         The parameters used.
     method : str
@@ -148,36 +177,16 @@ class EditResult:
     image: np.ndarray
     material: MaterialSpec
     mask: np.ndarray
-    depth: np.ndarray
-    normals: np.ndarray
-    background: np.ndarray
-    environment: np.ndarray
-    highlight_threshold: float
-    highlights: np.ndarray
+    estimates: Estimates
     settings: EditSettings = field(default_factory=EditSettings)
     method: str = "baseline"
     trust: dict | None = None
 
-
-@dataclass(frozen=True)
-class Estimates:
-    """What the baseline reads from the photograph, the starting point of every method.
-
-    Attributes
-    ----------
-    depth, normals, background, environment, highlight_threshold, highlights, gradients, strength
-        As in :class:`EditResult`; ``gradients`` the reshaped ``(g_x, g_y)``, ``strength`` the
-        warp ``s`` in pixels.
-    """
-
-    depth: np.ndarray
-    normals: np.ndarray
-    background: np.ndarray
-    environment: np.ndarray
-    highlight_threshold: float
-    highlights: np.ndarray
-    gradients: tuple[np.ndarray, np.ndarray]
-    strength: float
+    def __getattr__(self, name: str):
+        # The estimates' fields read as the result's own (result.depth, result.environment, ...).
+        if name in Estimates.__dataclass_fields__:
+            return getattr(self.estimates, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
 def _read_photo(photo) -> tuple[np.ndarray, Path | None]:
@@ -313,8 +322,7 @@ def _baseline(rgb: np.ndarray, m: np.ndarray, spec: MaterialSpec, settings: Edit
             seen = darken(seen, m, settings.dark_exponent)
         image = np.where(m[..., None], seen + highlight_layer(rgb, m, threshold), rgb)
 
-    return EditResult(np.asarray(image, np.float32), spec, m, est.depth, normals, background,
-                      environment, threshold, est.highlights, settings)
+    return EditResult(np.asarray(image, np.float32), spec, m, est, settings)
 
 
 register_method("baseline", _baseline)

@@ -30,7 +30,7 @@ beyond one scale (the unseen half of the map stays the baseline's mirror image).
 from __future__ import annotations
 
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -362,6 +362,5 @@ def synthesis_edit(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, settin
         target_material(spec, np.ones(3), 0.1, 1.0, Path("."))
     fitted = fit_photograph(rgb, mask, est, syn)
     image = edit_fitted(rgb, mask, spec, fitted, syn, settings.merl_dir)
-    return EditResult(image, spec, mask, est.depth, est.normals, est.background,
-                      fitted.environment, est.highlight_threshold, est.highlights, settings,
+    return EditResult(image, spec, mask, replace(est, environment=fitted.environment), settings,
                       "synthesis", fitted.trust)
