@@ -68,9 +68,10 @@ class SynthesisSettings:
         Depth of the inflated mesh relative to a round solid (1: a sphere for a disc).
     roughness_candidates : tuple of float
         GGX roughness of the current plastic tried; the smallest residual wins.
-    map_height : int
-        Height of the environment map (width twice); the field of view must get about a texel per
-        pixel for the backdrop seen through glass to stay sharp.
+    map_height : int or None
+        Height of the environment map (width twice). ``None``: a texel per pixel of the
+        photograph across the field of view (``height 180 / fov_deg``, between 256 and 2048), so
+        that the backdrop seen through glass stays as sharp as photographed.
     fit_spp, render_spp : int
         Samples per pixel of the fit's renders and of the final renders.
     max_iterations, refinement_steps : int
@@ -94,7 +95,7 @@ class SynthesisSettings:
     distance_m: float = 1.0
     relief: float = 1.0
     roughness_candidates: tuple[float, ...] = (0.05, 0.1, 0.2)
-    map_height: int = 1024
+    map_height: int | None = None
     fit_spp: int = 8
     render_spp: int = 64
     max_iterations: int = 8
@@ -256,8 +257,9 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
     h, w = mask.shape
     view = photo_camera((h, w), syn.fov_deg)
     vertices, faces = inflated_mesh(mask, view["K"], syn.distance_m, syn.relief)
+    map_height = syn.map_height or int(np.clip(np.ceil(h * 180.0 / syn.fov_deg), 256, 2048))
     environment, seen = environment_with_backdrop(est.environment, est.background, view["K"],
-                                                  syn.map_height)
+                                                  map_height)
     with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
         folder = Path(syn.folder) if syn.folder else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
