@@ -202,6 +202,9 @@ def test_the_method_is_chosen_by_name_and_refuses_what_it_cannot_do():
         edit(photo, mask, "texture:wood.exr", "synthesis")
     with pytest.raises(InputError, match="settings.synthesis: expected SynthesisSettings"):
         edit(photo, mask, "glossier", "synthesis", settings=EditSettings(synthesis={"fov": 3}))
+    with pytest.raises(InputError, match=r"settings.synthesis.fov_deg: expected degrees in "
+                                         r"\(0, 180\), got 0"):
+        SynthesisSettings(fov_deg=0)
     with pytest.raises(InputError, match="unknown method 'magic'"):
         edit(photo, mask, "glossier", "magic")
 

@@ -35,8 +35,9 @@ import numpy as np
 from abs.editing.spec import MaterialSpec
 from abs.errors import InputError
 
-__all__ = ["GLOSSIER_FACTOR", "DIFFUSE_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS", "TRANSLUCENT_ROUGHNESS",
-           "DARK_TRANSMITTANCE", "current_material", "target_material", "TRANSMISSIVE"]
+__all__ = ["GLOSSIER_FACTOR", "DIFFUSE_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS",
+           "TRANSLUCENT_ROUGHNESS", "DARK_TRANSMITTANCE", "current_material", "target_material", "check_target",
+           "TRANSMISSIVE"]
 
 GLOSSIER_FACTOR = 5.0
 """``glossier`` divides the roughness by this."""
@@ -54,6 +55,19 @@ def current_material(reflectance, roughness: float) -> dict:
     """The scene-file table of the current material (plastic)."""
     return {"type": "plastic", "reflectance": [float(v) for v in np.asarray(reflectance)],
             "roughness": float(roughness)}
+
+
+def check_target(spec: MaterialSpec) -> None:
+    """Refuse a target this method cannot render (before any fit is spent on it).
+
+    Raises
+    ------
+    InputError
+        For ``texture:FILE``: the inflated mesh has no UV parametrisation yet.
+    """
+    if spec.kind == "texture":
+        raise InputError(None, "to", "the synthesis method does not re-texture yet (no UV "
+                                     "parametrisation of the inflated mesh); use --method baseline")
 
 
 def target_material(spec: MaterialSpec, reflectance, roughness: float, diameter_m: float,
@@ -96,9 +110,7 @@ def target_material(spec: MaterialSpec, reflectance, roughness: float, diameter_
         path = Path(folder) / f"{spec.argument}.binary"
         write_merl(path, np.maximum(measured_table(spec.argument, merl_dir), 0.0))
         return {"type": "merl", "file": path.name}
-    if spec.kind == "texture":
-        raise InputError(None, "to", "the synthesis method does not re-texture yet (no UV "
-                                     "parametrisation of the inflated mesh); use --method baseline")
+    check_target(spec)
     glass = {"type": "dielectric", "ior": [GLASS_IOR] * 3}
     variant = spec.argument if spec.kind == "glass" else "translucent"
     if variant == "frosted":

@@ -10,21 +10,21 @@ renderer then explains the photograph, and the edit is a rendering:
    (:mod:`~abs.resynthesis.backdrop`).
 2. **Fit** (:func:`abs.fit`, Levenberg-Marquardt with Laplace errors): the current material's
    reflectance (``plastic``) and the environment's scale, for each candidate roughness; the
-   candidate with the smallest residual wins. The residual RMSE against the photograph, and its
-   ratio to the pixel noise, is the edit's trust measure (``EditResult.trust``).
-3. **Scene of the edit.** The fitted scale is applied to the part of the map the camera did not
-   see; the backdrop keeps the photograph's own radiance (scale 1), so what glass shows of it
-   matches the photograph around the object.
+   candidate with the smallest residual wins.
+3. **Light.** The unseen part of the map (the backdrop stays as photographed) replaced by a
+   smooth map fitted to the object as a light probe (:mod:`~abs.resynthesis.lighting`), starting
+   from the scaled baseline map; then the material and scale fitted again under it. The residual
+   RMSE against the photograph, and its ratio to the pixel noise, is the edit's trust measure
+   (``EditResult.trust``).
 4. **Render** the object with the target material (:mod:`~abs.resynthesis.materials`) and with
-   the fitted current one, same seed.
+   the fitted current one, same seed; the fitted scale applies to the unseen light only.
 5. **Composite** with the mask. Opaque targets (gloss, measured BRDF): differential rendering
    (Debevec 1998), ``photo + (new - current)``: what the fitted model misses of the photograph
    (its residual) stays in the edit, and the edit of the current material to itself is the
    photograph up to Monte-Carlo noise. Glass and translucency: the rendering itself, because the
    residual of an opaque fit describes a surface that is no longer there.
 
-Not (yet) refined: the shape (the inflation is kept as it is, ``relief`` 1) and the environment
-beyond one scale (the unseen half of the map stays the baseline's mirror image).
+Not refined: the shape (the inflation is kept as it is, ``relief`` 1) and the field of view.
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ from abs.errors import InputError
 from abs.resynthesis.backdrop import environment_with_backdrop, frustum_texels
 from abs.resynthesis.inflation import inflated_mesh
 from abs.resynthesis.lighting import hat_averages, hat_basis, map_from_gains, solve_gains
-from abs.resynthesis.materials import TRANSMISSIVE, current_material, target_material
+from abs.resynthesis.materials import (TRANSMISSIVE, check_target, current_material,
+                                       target_material)
 from abs.resynthesis.studio import (photo_camera, write_capture, write_environment, write_mesh,
                                     write_scene_file)
 
@@ -106,6 +107,22 @@ class SynthesisSettings:
     light_ridge: float = 1e-3
     seed: int = 0
     folder: str | None = None
+
+    def __post_init__(self):
+        field = "settings.synthesis"
+        if not 0 < self.fov_deg < 180:
+            raise InputError(None, f"{field}.fov_deg", f"expected degrees in (0, 180), got "
+                                                       f"{self.fov_deg}")
+        for name in ("fit_spp", "render_spp", "light_spp", "max_iterations", "max_depth"):
+            if getattr(self, name) < 1:
+                raise InputError(None, f"{field}.{name}", f"must be at least 1, got "
+                                                          f"{getattr(self, name)}")
+        if not self.roughness_candidates or not all(0 <= r <= 1 for r in self.roughness_candidates):
+            raise InputError(None, f"{field}.roughness_candidates", "expected one or more GGX "
+                             f"roughnesses in [0, 1], got {self.roughness_candidates}")
+        if self.distance_m <= 0 or self.relief <= 0:
+            raise InputError(None, field, f"distance_m and relief must be > 0, got "
+                                          f"{self.distance_m} and {self.relief}")
 
 
 def _initial_reflectance(rgb: np.ndarray, mask: np.ndarray, environment: np.ndarray) -> np.ndarray:
@@ -360,8 +377,7 @@ def synthesis_edit(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, settin
         ``environment`` the fitted map.
     """
     syn = _settings(settings)
-    if spec.kind == "texture":  # refuse before the fit, not after it
-        target_material(spec, np.ones(3), 0.1, 1.0, Path("."))
+    check_target(spec)  # refuse before the fit, not after it
     fitted = fit_photograph(rgb, mask, est, syn)
     image = edit_fitted(rgb, mask, spec, fitted, syn, settings.merl_dir)
     return EditResult(image, spec, mask, replace(est, environment=fitted.environment), settings,
