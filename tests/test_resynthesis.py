@@ -118,7 +118,8 @@ def test_the_backdrop_is_the_photographed_radiance_in_the_camera_frustum():
     assert np.all(latlong[~seen] == 7.0)
     # The frustum covers the field of view's solid angle: 4 arcsin(sin(a/2) sin(b/2)).
     theta = np.pi * np.arange(512) / 511
-    area = (frustum_texels(K, (h, w), 512) * np.sin(theta)[:, None]).sum() * (np.pi / 511) * (np.pi / 512)
+    texel = (np.pi / 511) * (np.pi / 512)  # d(theta) d(phi) of a 512x1024 map
+    area = (frustum_texels(K, (h, w), 512) * np.sin(theta)[:, None]).sum() * texel
     half_y = np.deg2rad(FOV) / 2
     half_x = np.arctan(np.tan(half_y) * w / h)
     assert area == pytest.approx(4 * np.arcsin(np.sin(half_x) * np.sin(half_y)), rel=0.03)

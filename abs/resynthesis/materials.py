@@ -1,7 +1,8 @@
 """Scene-file materials of the analysis-by-synthesis edit: the current one and the targets.
 
 The current material is ``plastic`` (a diffuse base under a GGX-rough coating): its reflectance
-is fitted, its roughness chosen among candidates by the fit residual (:mod:`~abs.resynthesis.method`).
+is fitted, its roughness chosen among candidates by the fit residual
+(:mod:`~abs.resynthesis.method`).
 A target is made from the fitted current material where the spec leaves a quantity open:
 
 ============================  ====================================================================
@@ -36,7 +37,8 @@ from abs.editing.spec import MaterialSpec
 from abs.errors import InputError
 
 __all__ = ["GLOSSIER_FACTOR", "DIFFUSE_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS",
-           "TRANSLUCENT_ROUGHNESS", "DARK_TRANSMITTANCE", "current_material", "target_material", "check_target",
+           "TRANSLUCENT_ROUGHNESS", "DARK_TRANSMITTANCE", "current_material", "target_material",
+           "check_target",
            "TRANSMISSIVE"]
 
 GLOSSIER_FACTOR = 5.0
