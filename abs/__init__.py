@@ -9,11 +9,14 @@ from abs.errors import CaptureError, DeviceError, InputError, SceneError
 from abs.scene import load_scene
 
 __version__ = "0.1.0"
-__all__ = ["load_scene", "fit", "scan", "FitSettings", "sample", "SampleSettings", "InputError",
+__all__ = ["load_scene", "fit", "scan", "FitSettings", "sample", "SampleSettings", "edit",
+           "InputError",
            "SceneError", "CaptureError", "DeviceError", "__version__"]
 
 _LAZY = {"fit": "abs.fitting", "scan": "abs.fitting", "FitSettings": "abs.fitting",
-         "sample": "abs.sampling", "SampleSettings": "abs.sampling"}
+         "sample": "abs.sampling", "SampleSettings": "abs.sampling",
+         # abs.resynthesis re-exports abs.editing.edit with the synthesis method registered.
+         "edit": "abs.resynthesis"}
 
 
 def __getattr__(name: str):

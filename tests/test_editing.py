@@ -311,11 +311,10 @@ def test_bad_masks_are_refused(tmp_path):
         edit(photo, touching, "glass")
 
 
-def test_the_abs_method_is_refused_until_it_exists():
+def test_an_unknown_method_is_refused_naming_the_known_ones():
     photo, mask = synthetic_photo()
-    with pytest.raises(InputError, match="not implemented yet"):
-        edit(photo, mask, "glass", method="abs")
-    with pytest.raises(InputError, match="unknown method"):
+    with pytest.raises(InputError, match=r"method: unknown method 'magic'; expected one of "
+                                         r"baseline, .*synthesis"):
         edit(photo, mask, "glass", method="magic")
 
 

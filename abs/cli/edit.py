@@ -5,7 +5,9 @@
 writes to DIR: ``edited.exr`` (linear) and ``edited.png`` (tone-mapped at the photograph's
 exposure), the estimates it was made from (``background.exr``, ``environment.exr`` — a lat-long map
 in abs's convention, usable as a scene's environment —, ``depth.exr``, ``normals.png``,
-``highlights.png``) and ``edit.json`` (material, method, settings, highlight threshold).
+``highlights.png``) and ``edit.json`` (material, method, settings, highlight threshold, and for
+``--method synthesis`` the fit's residual and values: ``trust``; ``environment.exr`` is then the
+fitted map).
 """
 
 from __future__ import annotations
@@ -22,7 +24,14 @@ def add_parser(sub) -> None:
                    help="the object's mask (same size; nonzero = object; must not touch the border)")
     p.add_argument("--to", required=True, help=f"target material: {GRAMMAR}")
     p.add_argument("--out", type=Path, required=True, help="folder to write the results to")
-    p.add_argument("--method", default="baseline", help="baseline (Khan et al. 2006; default)")
+    p.add_argument("--method", default="baseline",
+                   help="baseline (Khan et al. 2006; default) or synthesis (analysis by synthesis: "
+                        "fit the photograph with abs's renderer, render the new material)")
+    p.add_argument("--fov", type=float, default=24.0,
+                   help="synthesis: the photograph's vertical field of view, degrees "
+                        "(default %(default)s)")
+    p.add_argument("--spp", type=int, default=64,
+                   help="synthesis: samples per pixel of the final renderings (default %(default)s)")
     p.add_argument("--samples", type=int, default=400,
                    help="environment directions per pixel for merl:NAME (default %(default)s)")
     p.add_argument("--reshape", type=int, default=1,
@@ -46,8 +55,17 @@ def run_edit(args) -> int:
         raise InputError(None, "--samples", f"must be at least 1, got {args.samples}")
     if not 0 <= args.reshape <= 4:
         raise InputError(None, "--reshape", f"expected 0 to 4 (the paper: 1 to 4), got {args.reshape}")
+    import abs.resynthesis  # registers the synthesis method  # noqa: F401
+    from abs.resynthesis import SynthesisSettings
+
+    if not 0 < args.fov < 180:
+        raise InputError(None, "--fov", f"expected degrees in (0, 180), got {args.fov}")
+    if args.spp < 1:
+        raise InputError(None, "--spp", f"must be at least 1, got {args.spp}")
     settings = EditSettings(samples=args.samples, reshape_times=args.reshape, seed=args.seed,
-                            merl_dir=args.merl_dir)
+                            merl_dir=args.merl_dir,
+                            synthesis=SynthesisSettings(fov_deg=args.fov, render_spp=args.spp,
+                                                        seed=args.seed))
     try:
         result = edit(args.photo, args.mask, args.to, args.method, settings=settings)
     except InputError as exc:
@@ -73,7 +91,13 @@ def run_edit(args) -> int:
                "method": args.method, "highlight_threshold": result.highlight_threshold,
                "object_pixels": int(result.mask.sum()),
                "highlight_pixels": int(result.highlights.sum()),
-               "settings": {k: v for k, v in vars(result.settings).items()}}
+               "settings": {k: (vars(v) if k == "synthesis" and v is not None else v)
+                            for k, v in vars(result.settings).items()},
+               # The synthesis fit's residual against the photograph's noise: how far to trust it.
+               "trust": result.trust}
     (out / "edit.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    if result.trust is not None:
+        print(f"abs edit: fit residual {result.trust['residual_rmse']:.4g} = "
+              f"{result.trust['noise_ratio']:.1f} x the photograph's noise")
     print(f"abs edit: {result.material} ({args.method}) -> {out}")
     return 0

@@ -3,14 +3,18 @@
 The baseline is Khan et al. (2006), "Image-Based Material Editing" (docs/editing.md): from one
 linear HDR photograph and the object's mask it estimates depth from luminance, normals, the
 background behind the object and an environment map, then applies the target material's
-transform and composites the object back. Analysis by synthesis (``method="abs"``, issue 30's
-second part) is not implemented yet and is refused with an :class:`~abs.errors.InputError`.
+transform and composites the object back.
+
+Methods are looked up by name in :data:`METHODS` (:func:`register_method`): this module registers
+``baseline``; :mod:`abs.resynthesis` (analysis by synthesis, a higher layer: it needs the renderer
+and the fitter) registers ``synthesis`` when it is imported (``abs.edit`` and ``abs edit`` do).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -30,10 +34,21 @@ from abs.editing.transparency import (DARK_EXPONENT, FROSTED_BLUR, TRANSLUCENT_B
 from abs.editing.warp import default_strength, warp_coordinates
 from abs.errors import InputError
 
-__all__ = ["METHODS", "EditSettings", "EditResult", "edit"]
+__all__ = ["METHODS", "EditSettings", "EditResult", "edit", "register_method", "Estimates",
+           "estimate"]
 
-METHODS = ("baseline", "abs")
-"""Edit methods: the paper's ``baseline``; ``abs`` (analysis by synthesis) is not built yet."""
+METHODS: dict[str, Callable] = {}
+"""Edit methods by name: ``function(rgb, mask, spec, settings, estimates, texture) -> EditResult``
+(``rgb``, ``mask`` checked; ``estimates`` the baseline's :class:`Estimates`)."""
+
+KNOWN_ELSEWHERE = {"synthesis": "abs.resynthesis"}
+"""Methods registered by a module above this layer: named in the error when not imported."""
+
+
+def register_method(name: str, function: Callable) -> Callable:
+    """Make ``function`` the edit method ``name`` (see :data:`METHODS`); returns it."""
+    METHODS[name] = function
+    return function
 
 
 @dataclass(frozen=True)
@@ -72,6 +87,9 @@ class EditSettings:
         (under environment light, half of a plastic sphere: benchmarks/material_edit.py).
     merl_dir : str or None
         Folder of real MERL ``.binary`` files; ``None``: the shared neural fits.
+    synthesis : object or None
+        The ``synthesis`` method's settings (:class:`abs.resynthesis.SynthesisSettings`);
+        ``None``: its defaults. The baseline ignores it.
     """
 
     reshape_times: int = 1
@@ -90,20 +108,16 @@ class EditSettings:
     highlight_bins: int | None = None
     highlight_threshold: float | None = None
     merl_dir: str | None = None
+    synthesis: object | None = None
 
 
-@dataclass
-class EditResult:
-    """An edit and the estimates it was made from (all linear, docs/conventions.md frames).
+@dataclass(frozen=True)
+class Estimates:
+    """What the baseline reads from the photograph, the starting point of every method (linear,
+    docs/conventions.md frames).
 
     Attributes
     ----------
-    image : np.ndarray
-        ``(height, width, 3)`` the edited photograph.
-    material : MaterialSpec
-        The target.
-    mask : np.ndarray
-        ``(height, width)`` bool, the object.
     depth : np.ndarray
         ``(height, width)`` depth towards the viewer, pixels.
     normals : np.ndarray
@@ -116,20 +130,63 @@ class EditResult:
         Luminance above which object pixels are highlights.
     highlights : np.ndarray
         ``(height, width)`` bool, the highlight pixels.
-    settings : EditSettings
-        The parameters used.
+    gradients : tuple of np.ndarray
+        The reshaped depth gradients ``(g_x, g_y)``.
+    strength : float
+        The warp ``s``, pixels.
     """
 
-    image: np.ndarray
-    material: MaterialSpec
-    mask: np.ndarray
     depth: np.ndarray
     normals: np.ndarray
     background: np.ndarray
     environment: np.ndarray
     highlight_threshold: float
     highlights: np.ndarray
+    gradients: tuple[np.ndarray, np.ndarray]
+    strength: float
+
+
+@dataclass
+class EditResult:
+    """An edit and the estimates it was made from.
+
+    ``depth``, ``normals``, ``background``, ``environment``, ``highlight_threshold`` and
+    ``highlights`` are those of :attr:`estimates` (:class:`Estimates`); a method that fits the
+    light hands back its fitted map as ``environment``.
+
+    Attributes
+    ----------
+    image : np.ndarray
+        ``(height, width, 3)`` the edited photograph, linear.
+    material : MaterialSpec
+        The target.
+    mask : np.ndarray
+        ``(height, width)`` bool, the object.
+    estimates : Estimates
+        What the edit was made from.
+    settings : EditSettings
+        The parameters used.
+    method : str
+        The method that made it.
+    trust : dict or None
+        Analysis by synthesis: the fit of the current material (residual RMSE against the
+        photograph's noise, fitted parameters; :mod:`abs.resynthesis`). ``None`` for the
+        baseline, which has no measure of its own error.
+    """
+
+    image: np.ndarray
+    material: MaterialSpec
+    mask: np.ndarray
+    estimates: Estimates
     settings: EditSettings = field(default_factory=EditSettings)
+    method: str = "baseline"
+    trust: dict | None = None
+
+    def __getattr__(self, name: str):
+        # The estimates' fields read as the result's own (result.depth, result.environment, ...).
+        if name in Estimates.__dataclass_fields__:
+            return getattr(self.estimates, name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
 def _read_photo(photo) -> tuple[np.ndarray, Path | None]:
@@ -176,7 +233,8 @@ def edit(photo, mask, to: str | MaterialSpec = "glossier", method: str = "baseli
         ``glass:frosted``, ``glass:tinted``, ``glass:dark``, ``translucent``, ``merl:NAME``,
         ``texture:FILE``).
     method : str
-        ``"baseline"`` (Khan et al. 2006). ``"abs"`` is refused (not implemented yet).
+        A name in :data:`METHODS`: ``"baseline"`` (Khan et al. 2006) or, once
+        :mod:`abs.resynthesis` is imported, ``"synthesis"`` (analysis by synthesis).
     settings : EditSettings, optional
         Parameters; the defaults otherwise.
     texture : np.ndarray, optional
@@ -195,16 +253,22 @@ def edit(photo, mask, to: str | MaterialSpec = "glossier", method: str = "baseli
     settings = settings or EditSettings()
     spec = to if isinstance(to, MaterialSpec) else parse_material(to)
     if method not in METHODS:
+        hint = (f"; {method!r} is registered by {KNOWN_ELSEWHERE[method]}: import it, or call "
+                f"abs.edit" if method in KNOWN_ELSEWHERE else "")
+        known = sorted(set(METHODS) | set(KNOWN_ELSEWHERE))
         raise InputError(None, "method", f"unknown method {method!r}; expected one of "
-                                         f"{', '.join(METHODS)}")
-    if method == "abs":
-        raise InputError(None, "method", "analysis-by-synthesis editing ('abs') is not "
-                                         "implemented yet (issue 30, second part); use 'baseline'")
+                                         f"{', '.join(known)}{hint}")
     rgb, photo_path = _read_photo(photo)
     rgb = check_photograph(rgb, photo_path)
     raw_mask, mask_path = _read_mask(mask, rgb.shape)
     m = check_mask(raw_mask, rgb.shape, mask_path)
+    result = METHODS[method](rgb, m, spec, settings, estimate(rgb, m, settings), texture)
+    result.method = method
+    return result
 
+
+def estimate(rgb: np.ndarray, m: np.ndarray, settings: EditSettings) -> Estimates:
+    """The baseline's estimates from a checked photograph and mask (docs/editing.md, steps 2-6)."""
     lum = luminance(rgb)
     depth = depth_from_luminance(rgb, m, spatial_fraction=settings.spatial_fraction,
                                  sigma_range=settings.sigma_range, relief=settings.relief)
@@ -215,7 +279,16 @@ def edit(photo, mask, to: str | MaterialSpec = "glossier", method: str = "baseli
     threshold = (highlight_threshold(lum, m, settings.highlight_bins)
                  if settings.highlight_threshold is None else float(settings.highlight_threshold))
     strength = default_strength(m) if settings.strength is None else settings.strength
+    return Estimates(depth, normals, background, environment, threshold,
+                     highlight_mask(lum, m, threshold), (gx, gy), strength)
 
+
+def _baseline(rgb: np.ndarray, m: np.ndarray, spec: MaterialSpec, settings: EditSettings,
+              est: Estimates, texture: np.ndarray | None) -> EditResult:
+    """Khan et al. (2006): the target material's image-space transform (docs/editing.md)."""
+    background, environment, normals = est.background, est.environment, est.normals
+    threshold, strength = est.highlight_threshold, est.strength
+    gx, gy = est.gradients
     if spec.kind in ("glossier", "diffuse"):
         beta = settings.glossier_beta if spec.kind == "glossier" else settings.diffuse_beta
         image = remap_gloss(rgb, m, threshold, settings.gloss_alpha, beta)
@@ -249,5 +322,7 @@ def edit(photo, mask, to: str | MaterialSpec = "glossier", method: str = "baseli
             seen = darken(seen, m, settings.dark_exponent)
         image = np.where(m[..., None], seen + highlight_layer(rgb, m, threshold), rgb)
 
-    return EditResult(np.asarray(image, np.float32), spec, m, depth, normals, background,
-                      environment, threshold, highlight_mask(lum, m, threshold), settings)
+    return EditResult(np.asarray(image, np.float32), spec, m, est, settings)
+
+
+register_method("baseline", _baseline)

@@ -1,0 +1,384 @@
+"""Material editing by analysis by synthesis (issue 30, "Beyond the paper").
+
+The baseline's estimates (:func:`abs.editing.edit.estimate`) are the starting point; abs's
+renderer then explains the photograph, and the edit is a rendering:
+
+1. **Scene.** A pinhole camera of the photograph's field of view (``fov_deg``: one photograph
+   does not give it) at the origin; the object as the mask inflated into a closed round solid
+   (:mod:`~abs.resynthesis.inflation`); the environment as the baseline's map with the
+   photograph's filled background painted in where the camera sees it
+   (:mod:`~abs.resynthesis.backdrop`).
+2. **Fit** (:func:`abs.fit`, Levenberg-Marquardt with Laplace errors): the current material's
+   reflectance (``plastic``) and the environment's scale, for each candidate roughness; the
+   candidate with the smallest residual wins.
+3. **Light.** The unseen part of the map (the backdrop stays as photographed) replaced by a
+   smooth map fitted to the object as a light probe (:mod:`~abs.resynthesis.lighting`), starting
+   from the scaled baseline map; then the material and scale fitted again under it. The residual
+   RMSE against the photograph, and its ratio to the pixel noise, is the edit's trust measure
+   (``EditResult.trust``).
+4. **Render** the object with the target material (:mod:`~abs.resynthesis.materials`) and with
+   the fitted current one, same seed; the fitted scale applies to the unseen light only.
+5. **Composite** with the mask. Opaque targets (gloss, measured BRDF): differential rendering
+   (Debevec 1998), ``photo + (new - current)``: what the fitted model misses of the photograph
+   (its residual) stays in the edit, and the edit of the current material to itself is the
+   photograph up to Monte-Carlo noise. Glass and translucency: the rendering itself, because the
+   residual of an opaque fit describes a surface that is no longer there.
+
+Not refined: the shape (the inflation is kept as it is, ``relief`` 1) and the field of view.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from abs.colour.srgb import luminance
+from abs.editing.edit import EditResult, EditSettings, Estimates
+from abs.editing.spec import MaterialSpec
+from abs.errors import InputError
+from abs.resynthesis.backdrop import environment_with_backdrop, frustum_texels
+from abs.resynthesis.inflation import inflated_mesh
+from abs.resynthesis.lighting import hat_averages, hat_basis, map_from_gains, solve_gains
+from abs.resynthesis.materials import (TRANSMISSIVE, check_target, current_material,
+                                       target_material)
+from abs.resynthesis.studio import (photo_camera, write_capture, write_environment, write_mesh,
+                                    write_scene_file)
+
+__all__ = ["SynthesisSettings", "FittedScene", "fit_photograph", "render_material", "edit_fitted",
+           "synthesis_edit", "composite"]
+
+
+@dataclass(frozen=True)
+class SynthesisSettings:
+    """Settings of the analysis-by-synthesis edit.
+
+    Attributes
+    ----------
+    fov_deg : float
+        The photograph's vertical field of view, degrees (a pinhole camera).
+    distance_m : float
+        Distance of the silhouette's plane from the camera, metres. Images are scale-free
+        (an object twice as large twice as far looks the same) except through absorption, which
+        :mod:`~abs.resynthesis.materials` sets per object diameter, so this only sets units.
+    relief : float
+        Depth of the inflated mesh relative to a round solid (1: a sphere for a disc).
+    roughness_candidates : tuple of float
+        GGX roughness of the current plastic tried; the smallest residual wins.
+    map_height : int or None
+        Height of the environment map (width twice). ``None``: a texel per pixel of the
+        photograph across the field of view (``height 180 / fov_deg``, between 256 and 2048), so
+        that the backdrop seen through glass stays as sharp as photographed.
+    fit_spp, render_spp : int
+        Samples per pixel of the fit's renders and of the final renders.
+    max_iterations, refinement_steps : int
+        The fit's Levenberg-Marquardt evaluations and Gauss-Newton refinement steps.
+    max_depth : int
+        Path segments (glass needs several).
+    light_grid : tuple of int
+        ``(n_theta, n_phi)`` nodes of the smooth map fitted to the unseen light
+        (:mod:`~abs.resynthesis.lighting`); ``(0, 0)``: keep the baseline's map, scaled.
+    light_spp : int
+        Samples per pixel of each basis rendering of that fit.
+    light_ridge : float
+        Its pull towards the baseline's map (:func:`~abs.resynthesis.lighting.solve_gains`).
+    seed : int
+        Seed of the renders.
+    folder : str or None
+        Where the scene, capture and fits are written; ``None``: a temporary folder, removed.
+    """
+
+    fov_deg: float = 24.0
+    distance_m: float = 1.0
+    relief: float = 1.0
+    roughness_candidates: tuple[float, ...] = (0.05, 0.1, 0.2)
+    map_height: int | None = None
+    fit_spp: int = 8
+    render_spp: int = 64
+    max_iterations: int = 8
+    refinement_steps: int = 2
+    max_depth: int = 12
+    light_grid: tuple[int, int] = (7, 8)
+    light_spp: int = 16
+    light_ridge: float = 1e-3
+    seed: int = 0
+    folder: str | None = None
+
+    def __post_init__(self):
+        field = "settings.synthesis"
+        if not 0 < self.fov_deg < 180:
+            raise InputError(None, f"{field}.fov_deg", f"expected degrees in (0, 180), got "
+                                                       f"{self.fov_deg}")
+        for name in ("fit_spp", "render_spp", "light_spp", "max_iterations", "max_depth"):
+            if getattr(self, name) < 1:
+                raise InputError(None, f"{field}.{name}", f"must be at least 1, got "
+                                                          f"{getattr(self, name)}")
+        if not self.roughness_candidates or not all(0 <= r <= 1 for r in self.roughness_candidates):
+            raise InputError(None, f"{field}.roughness_candidates", "expected one or more GGX "
+                             f"roughnesses in [0, 1], got {self.roughness_candidates}")
+        if self.distance_m <= 0 or self.relief <= 0:
+            raise InputError(None, field, f"distance_m and relief must be > 0, got "
+                                          f"{self.distance_m} and {self.relief}")
+
+
+def _initial_reflectance(rgb: np.ndarray, mask: np.ndarray, environment: np.ndarray) -> np.ndarray:
+    # A Lambertian surface under a uniform environment of radiance E reflects rho E: the ratio of
+    # the object's mean colour to the map's mean radiance (per channel) starts the fit inside
+    # the bounds and near the scale the environment asks for.
+    ratio = rgb[mask].mean(axis=0) / np.maximum(environment.reshape(-1, 3).mean(axis=0), 1e-9)
+    return np.clip(ratio, 0.02, 0.95)
+
+
+def fit_mask(mask: np.ndarray) -> np.ndarray:
+    """The pixels the fit compares: the matte less its outline.
+
+    A pixel on the outline is a mix of object and background in the photograph, but wholly
+    object in a rendering of the inflated mesh (whose outline runs along the pixels' edges), so it
+    is left out unless that would leave too few (an object a few pixels wide).
+    """
+    inner = ndimage.binary_erosion(mask)
+    return inner if inner.sum() >= max(16, mask.sum() // 4) else mask
+
+
+def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
+                  fitted_env: np.ndarray, seen: np.ndarray, trust: dict,
+                  syn: SynthesisSettings) -> np.ndarray:
+    """The unseen light as a smooth map (:mod:`~abs.resynthesis.lighting`), full resolution."""
+    from abs.render import Camera, compile_scene
+    from abs.render.environment import Environment
+    from abs.scene import load_scene
+
+    n_theta, n_phi = syn.light_grid
+    inner = fit_mask(mask)
+    small = 64  # the hats are smooth: their renderings need no finer map
+    basis = hat_basis(small, n_theta, n_phi)
+    unseen_small = ~frustum_texels(view["K"], mask.shape, small)
+    path = write_scene_file(folder, "lighting.toml",
+                            current_material(trust["reflectance"], trust["roughness"]),
+                            syn.light_spp, syn.max_depth)
+    compiled = compile_scene(load_scene(path))
+    camera = Camera(view["K"], view["R"], view["t"], mask.shape[1], mask.shape[0])
+
+    def lit_by(latlong: np.ndarray) -> np.ndarray:
+        compiled.environment = Environment(latlong)
+        return np.asarray(compiled.render(camera, syn.light_spp, seed=syn.seed + 11).numpy())[inner]
+
+    fixed = lit_by(np.where(seen[..., None], fitted_env, 0.0))
+    responses = np.stack([lit_by(np.repeat((b * unseen_small)[..., None], 3, axis=2))
+                          for b in basis])
+    small_env = cv2.resize(np.ascontiguousarray(fitted_env), (2 * small, small),
+                           interpolation=cv2.INTER_AREA)
+    prior = hat_averages(small_env, basis, unseen_small)
+    gains = solve_gains(rgb[inner], fixed, responses, prior, syn.light_ridge)
+    trust["lighting"] = {"grid": [n_theta, n_phi], "prior": prior.tolist(), "gains": gains.tolist()}
+    return map_from_gains(gains, fitted_env.shape[0], n_theta, n_phi)
+
+
+def composite(photo: np.ndarray, mask: np.ndarray, new: np.ndarray, current: np.ndarray,
+              differential: bool) -> np.ndarray:
+    """The edited photograph: inside ``mask`` the rendering of the target, outside the photograph.
+
+    Parameters
+    ----------
+    photo, new, current : np.ndarray
+        ``(height, width, 3)`` linear: the photograph, the target's and the fitted current
+        material's renderings (same camera and seed).
+    mask : np.ndarray
+        ``(height, width)`` bool, the object's matte.
+    differential : bool
+        ``photo + new - current`` inside the mask (module docstring, step 5) instead of ``new``.
+    """
+    inside = photo + new - current if differential else new
+    return np.where(mask[..., None], np.maximum(inside, 0.0), photo).astype(np.float32)
+
+
+def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray,
+                 candidates: tuple[float, ...]) -> dict:
+    """Fit reflectance and environment scale for each candidate roughness; the best fit."""
+    from abs.fitting import FitSettings, fit
+
+    settings = FitSettings(spp=syn.fit_spp, max_iterations=syn.max_iterations,
+                           refinement_steps=syn.refinement_steps, seed=syn.seed,
+                           eval_spp=syn.fit_spp)
+    fits = {}
+    for roughness in candidates:
+        scene = write_scene_file(folder, f"fit_{roughness:g}.toml",
+                                 current_material(reflectance0, roughness), syn.fit_spp,
+                                 syn.max_depth)
+        result = fit(scene, folder / "capture", ["material.reflectance", "environment.scale"],
+                     settings)
+        fits[roughness] = result
+    best = min(fits, key=lambda r: fits[r].metrics["train_rmse"]["after"])
+    result = fits[best]
+    stderr = result.vector.split(result.uncertainty.stderr)
+    return {"roughness": best,
+            "reflectance": result.values["material.reflectance"].tolist(),
+            "reflectance_stderr": stderr["material.reflectance"].tolist(),
+            "scale": float(result.values["environment.scale"][0]),
+            "scale_stderr": float(stderr["environment.scale"][0]),
+            "residual_rmse": result.metrics["train_rmse"]["after"],
+            "initial_rmse": result.metrics["train_rmse"]["before"],
+            "noise": result.image_noise,
+            "candidates": {f"{r:g}": fits[r].metrics["train_rmse"]["after"] for r in fits},
+            "checks": list(result.checks)}
+
+
+@dataclass
+class FittedScene:
+    """The photograph explained: everything needed to render the object with another material.
+
+    Attributes
+    ----------
+    view : dict
+        The camera (``name``, ``K``, ``R``, ``t``; :func:`~abs.resynthesis.studio.photo_camera`).
+    shape : tuple of int
+        ``(height, width)`` of the photograph.
+    vertices, faces : np.ndarray
+        The inflated mesh, camera frame, metres.
+    environment : np.ndarray
+        The fitted lat-long map (backdrop as photographed, the rest scaled by the fit).
+    trust : dict
+        The fit: roughness, reflectance and scale with standard errors, residual RMSE, noise,
+        the candidates' residuals, the fit's checks.
+    """
+
+    view: dict
+    shape: tuple[int, int]
+    vertices: np.ndarray
+    faces: np.ndarray
+    environment: np.ndarray
+    trust: dict
+
+    @property
+    def diameter_m(self) -> float:
+        """The mesh's largest extent along a camera axis, metres."""
+        return float(np.ptp(self.vertices, axis=0).max())
+
+
+def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
+                   syn: SynthesisSettings) -> FittedScene:
+    """Steps 1-3 of the module docstring: the scene that explains the photograph.
+
+    Parameters
+    ----------
+    rgb, mask : np.ndarray
+        The checked photograph ``(height, width, 3)`` and matte ``(height, width)``.
+    est : Estimates
+        The baseline's estimates (:func:`abs.editing.edit.estimate`).
+    syn : SynthesisSettings
+    """
+    h, w = mask.shape
+    view = photo_camera((h, w), syn.fov_deg)
+    vertices, faces = inflated_mesh(mask, view["K"], syn.distance_m, syn.relief)
+    map_height = syn.map_height or int(np.clip(np.ceil(h * 180.0 / syn.fov_deg), 256, 2048))
+    environment, seen = environment_with_backdrop(est.environment, est.background, view["K"],
+                                                  map_height)
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        folder = Path(syn.folder) if syn.folder else Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_mesh(folder, vertices, faces, view["R"], view["t"])
+        write_capture(folder / "capture", view, rgb, fit_mask(mask))
+        write_environment(folder, environment)
+        trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment),
+                             syn.roughness_candidates)
+        # The unseen part of the map carries the fitted scale; the backdrop is measured radiance.
+        fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
+        if min(syn.light_grid) > 0:
+            unseen = _fit_lighting(folder, rgb, mask, view, fitted_env, seen, trust, syn)
+            write_environment(folder, np.where(seen[..., None], environment, unseen))
+            first = trust
+            trust = _fit_current(folder, syn, np.asarray(first["reflectance"]),
+                                 (first["roughness"],))
+            trust["first_fit"] = {k: first[k] for k in ("residual_rmse", "scale", "reflectance",
+                                                        "candidates")}
+            trust["lighting"] = first["lighting"]
+            fitted_env = np.where(seen[..., None], environment, unseen * trust["scale"])
+    level = float(np.mean(luminance(rgb)[mask]))
+    trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
+                 relative_residual=trust["residual_rmse"] / max(level, 1e-12),
+                 fov_deg=syn.fov_deg)
+    return FittedScene(view, (h, w), vertices, faces, fitted_env.astype(np.float32), trust)
+
+
+def render_material(fitted: FittedScene, material: dict, syn: SynthesisSettings) -> np.ndarray:
+    """Render the fitted scene with the object of scene-file material ``material``.
+
+    Returns
+    -------
+    np.ndarray
+        ``(height, width, 3)`` float32 linear radiance (``syn.render_spp``, seed ``syn.seed + 7``).
+    """
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    h, w = fitted.shape
+    view = fitted.view
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        folder = Path(tmp)
+        write_mesh(folder, fitted.vertices, fitted.faces, view["R"], view["t"])
+        write_environment(folder, fitted.environment)
+        path = write_scene_file(folder, "scene.toml", material, syn.render_spp, syn.max_depth)
+        image = compile_scene(load_scene(path)).render(
+            Camera(view["K"], view["R"], view["t"], w, h), syn.render_spp, seed=syn.seed + 7)
+        return np.asarray(image.numpy(), np.float32)
+
+
+def edit_fitted(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, fitted: FittedScene,
+                syn: SynthesisSettings, merl_dir: str | None = None) -> np.ndarray:
+    """Steps 4-5: the edited photograph from a fitted scene (module docstring)."""
+    trust = fitted.trust
+    current = render_material(fitted, current_material(trust["reflectance"], trust["roughness"]),
+                              syn)
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        target = target_material(spec, trust["reflectance"], trust["roughness"],
+                                 fitted.diameter_m, Path(tmp), merl_dir)
+        if target.get("type") == "merl":
+            target = {**target, "file": str(Path(tmp) / target["file"])}
+        new = render_material(fitted, target, syn)
+    return composite(rgb, mask, new, current, differential=spec.kind not in TRANSMISSIVE)
+
+
+def _settings(settings: EditSettings) -> SynthesisSettings:
+    syn = settings.synthesis or SynthesisSettings()
+    if not isinstance(syn, SynthesisSettings):
+        raise InputError(None, "settings.synthesis", f"expected SynthesisSettings, got "
+                                                     f"{type(syn).__name__}")
+    return syn
+
+
+def synthesis_edit(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, settings: EditSettings,
+                   est: Estimates, texture: np.ndarray | None = None) -> EditResult:
+    """The ``synthesis`` method of :func:`abs.editing.edit` (module docstring).
+
+    Parameters
+    ----------
+    rgb : np.ndarray
+        ``(height, width, 3)`` the checked linear HDR photograph.
+    mask : np.ndarray
+        ``(height, width)`` bool, the checked matte.
+    spec : MaterialSpec
+        The target.
+    settings : EditSettings
+        ``settings.synthesis`` (a :class:`SynthesisSettings`, or ``None`` for the defaults).
+    est : Estimates
+        The baseline's estimates (background, environment, depth ...).
+    texture : np.ndarray, optional
+        Unused (re-texturing is refused by this method).
+
+    Returns
+    -------
+    EditResult
+        With ``trust``: the fit (residual RMSE, noise, their ratio, the residual relative to the
+        object's mean luminance, fitted values with standard errors, the candidates' residuals);
+        ``environment`` the fitted map.
+    """
+    syn = _settings(settings)
+    check_target(spec)  # refuse before the fit, not after it
+    fitted = fit_photograph(rgb, mask, est, syn)
+    image = edit_fitted(rgb, mask, spec, fitted, syn, settings.merl_dir)
+    return EditResult(image, spec, mask, replace(est, environment=fitted.environment), settings,
+                      "synthesis", fitted.trust)
