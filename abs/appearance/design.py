@@ -63,16 +63,20 @@ FLOOR = (0.5, 0.5, 0.5)
 
 @dataclass(frozen=True)
 class Sphere:
-    """One sphere: centre and radius (metres), material class and sample index in that class."""
+    """One sphere: centre and radius (metres), material class and sample index in that class.
+
+    ``table`` (a scene-file material table), when given, replaces the class's sample.
+    """
 
     centre: tuple[float, float, float]
     radius: float
     material_class: str
     sample: int
+    table: dict | None = None
 
     @property
     def material(self) -> dict:
-        return MATERIAL_CLASSES[self.material_class][self.sample]
+        return self.table if self.table is not None else MATERIAL_CLASSES[self.material_class][self.sample]
 
 
 @dataclass(frozen=True)
@@ -80,18 +84,21 @@ class SceneSpec:
     """One scene of a design: a name, the wall colour (linear RGB) and its spheres.
 
     A sphere's material id in the geometry maps is its index in ``spheres`` plus one (0: no
-    sphere); its class is ``spheres[id - 1].material_class``.
+    sphere); its class is ``spheres[id - 1].material_class``. ``box=False`` leaves the box out
+    (the spheres alone under the environment: the closed-form case of the tests).
     """
 
     name: str
     walls: tuple[float, float, float]
     spheres: tuple[Sphere, ...]
     floor: tuple[float, float, float] = field(default=FLOOR)
+    box: bool = True
 
     def to_json(self) -> dict:
-        return {"name": self.name, "walls": list(self.walls), "floor": list(self.floor),
+        return {"name": self.name, "walls": list(self.walls), "floor": list(self.floor), "box": self.box,
                 "spheres": [{"centre": list(s.centre), "radius": s.radius,
-                             "class": s.material_class, "sample": s.sample} for s in self.spheres]}
+                             "class": s.material_class, "sample": s.sample, "material": s.material}
+                            for s in self.spheres]}
 
 
 def characterisation_design(samples: int = 2, classes: tuple[str, ...] | None = None,

@@ -80,11 +80,13 @@ def scene_dict(spec: SceneSpec) -> dict:
     x = ±0.5, open at the front and the top) and the spheres. No emitter: abs's renderer lights
     it with an environment, stock Mitsuba needs one added (:mod:`abs.appearance.renderers`)."""
     T = mi.ScalarTransform4f
-    d = {"type": "scene",
-         "floor": _rectangle(T().rotate([1, 0, 0], -90).scale(0.5), spec.floor),
-         "back": _rectangle(T().translate([0, 0.5, -0.5]).scale(0.5), spec.walls),
-         "left": _rectangle(T().translate([-0.5, 0.5, 0]).rotate([0, 1, 0], 90).scale(0.5), spec.walls),
-         "right": _rectangle(T().translate([0.5, 0.5, 0]).rotate([0, 1, 0], -90).scale(0.5), spec.walls)}
+    d = {"type": "scene"}
+    if spec.box:
+        d |= {"floor": _rectangle(T().rotate([1, 0, 0], -90).scale(0.5), spec.floor),
+              "back": _rectangle(T().translate([0, 0.5, -0.5]).scale(0.5), spec.walls),
+              "left": _rectangle(T().translate([-0.5, 0.5, 0]).rotate([0, 1, 0], 90).scale(0.5), spec.walls),
+              "right": _rectangle(T().translate([0.5, 0.5, 0]).rotate([0, 1, 0], -90).scale(0.5),
+                                  spec.walls)}
     for i, sphere in enumerate(spec.spheres):
         name = f"object{i + 1}"
         d[name] = {"type": "sphere", "center": list(sphere.centre), "radius": sphere.radius,
