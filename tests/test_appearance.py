@@ -317,9 +317,30 @@ def test_cli_characterise_and_transfer(tmp_path, capsys):
                  "--target", str(tmp_path / "b" / "scenes" / "wood-0-white" / "image.exr")]) == 0
     result = json.loads((tmp_path / "t.json").read_text())
     assert result["after"][0]["profile"] < result["before"][0]["profile"]
+    assert main(["appearance", "environment", str(scene / "image.exr"), "--geometry",
+                 str(scene / "geometry.npz"), "--out", str(tmp_path / "env.exr"), "--width", "32"]) == 0
+    from abs.io.images import read_image
+    assert read_image(tmp_path / "env.exr").shape == (16, 32, 3)
     assert main(["appearance", "characterise", "--renderer", "nope", "--out", str(tmp_path / "c"),
                  *common]) == 2
     assert main(["appearance", "transfer", str(scene / "image.exr"), "--geometry",
                  str(tmp_path / "a" / "characterisation.npz"), "--from", "x.npz", "--to", "y.npz",
                  "--out", str(tmp_path / "u.exr")]) == 2
     assert "meta.format" in capsys.readouterr().err
+
+
+# -- lighting from the background -------------------------------------------------------------
+
+def test_environment_from_background_of_a_constant_sky():
+    """Spheres alone under a constant map: the background is the map, and so is the estimate."""
+    from abs.appearance.background import background_to_world, environment_from_background
+
+    spec = SceneSpec("sky", (0.5, 0.5, 0.5), (Sphere((0.0, 0.25, 0.0), 0.2, "wood", 0),), box=False)
+    cam = design_camera(40)
+    image = renderer("abs").render(spec, _constant(0.7), cam, 4, 0)
+    env = environment_from_background(image, scene_geometry(spec, cam), width=64)
+    assert env.shape == (32, 64, 3)
+    np.testing.assert_allclose(env, 0.7, rtol=1e-4)
+    to_world = background_to_world(cam.R)
+    # The map's centre (u = 0.5, the horizon: local direction +z) is the camera's view direction.
+    np.testing.assert_allclose(to_world[:3, :3] @ [0, 0, 1], cam.R[2], atol=1e-12)

@@ -27,7 +27,8 @@ import numpy as np
 
 from abs.appearance.geometry import Geometry
 
-__all__ = ["Characterisation", "Accumulator", "theta_edges", "HIST_EDGES", "LOG_FLOOR"]
+__all__ = ["Characterisation", "Accumulator", "bin_moments", "object_bins", "theta_edges",
+           "HIST_EDGES", "LOG_FLOOR"]
 
 LOG_FLOOR = 1e-4
 """Radiance below this is counted at the floor in the log histograms."""
@@ -102,7 +103,7 @@ def object_bins(geometry: Geometry, edges: np.ndarray):
             yield obj, mask, bins
 
 
-def _bin_moments(values: np.ndarray, bins: np.ndarray, n_bins: int):
+def bin_moments(values: np.ndarray, bins: np.ndarray, n_bins: int):
     """Count, mean and variance per bin of ``values (n, 3)``: ``(n_bins,)``, ``(n_bins, 3)`` x 2."""
     n = np.bincount(bins, minlength=n_bins).astype(float)
     s1 = np.stack([np.bincount(bins, values[:, k], n_bins) for k in range(3)], axis=1)
@@ -149,10 +150,10 @@ class Accumulator:
             pixels = image[mask].astype(np.float64)
             light = lighting[mask].astype(np.float64)
             energy, light_energy = pixels.mean(axis=0), light.mean(axis=0)
-            n, mean_i, _ = _bin_moments(pixels, bins, n_bins)
-            _, mean_l, _ = _bin_moments(light, bins, n_bins)
-            _, mean_ib, var_ib = _bin_moments(pixels / np.where(energy > 0, energy, 1.0), bins, n_bins)
-            _, mean_lb, var_lb = _bin_moments(light / np.where(light_energy > 0, light_energy, 1.0),
+            n, mean_i, _ = bin_moments(pixels, bins, n_bins)
+            _, mean_l, _ = bin_moments(light, bins, n_bins)
+            _, mean_ib, var_ib = bin_moments(pixels / np.where(energy > 0, energy, 1.0), bins, n_bins)
+            _, mean_lb, var_lb = bin_moments(light / np.where(light_energy > 0, light_energy, 1.0),
                                               bins, n_bins)
             has = n > 0
             self.n[c, has] += n[has]

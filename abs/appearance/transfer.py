@@ -34,7 +34,7 @@ from dataclasses import replace
 import numpy as np
 
 from abs.appearance.geometry import Geometry
-from abs.appearance.statistics import Characterisation, _bin_moments, object_bins
+from abs.appearance.statistics import Characterisation, bin_moments, object_bins
 from abs.errors import InputError
 
 __all__ = ["COLOUR_MATRICES", "transfer", "colour_matrices", "check_compatible"]
@@ -148,8 +148,8 @@ def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
         energy = x.mean(axis=0)
         energy = np.where(energy > 0, energy, 1.0)
         xb = x / energy
-        n, mu, var = _bin_moments(xb, bins, n_bins)
-        _, light, _ = _bin_moments(x, bins, n_bins)
+        n, mu, var = bin_moments(xb, bins, n_bins)
+        _, light, _ = bin_moments(x, bins, n_bins)
         ok = (n > 0) & (source.counts[ca] > 0) & (target.counts[cb] > 0)
         gain = np.where(ok[:, None], target.alpha[cb] / np.where(ok[:, None], source.alpha[ca], 1.0), 1.0)
         weight = np.where(ok[:, None], n[:, None] * light, 0.0)

@@ -3,6 +3,7 @@
     abs appearance characterise --renderer NAME [--option KEY=VALUE ...] --out DIR
     abs appearance render --renderer NAME --design heldout --out DIR
     abs appearance transfer IMAGE --geometry GEOMETRY.npz --from A.npz --to B.npz --out OUT.exr
+    abs appearance environment IMAGE --geometry GEOMETRY.npz --out ENV.exr
 
 ``characterise`` renders the characterisation design with a registered renderer and writes
 ``DIR/characterisation.npz`` (the statistics), ``DIR/characterisation.json`` (a readable summary)
@@ -10,6 +11,9 @@ and, per scene, ``DIR/scenes/NAME/{image.exr,image.png,geometry.npz}``. ``render
 scenes of a design (the held-out ones to test a transfer on). ``transfer`` makes IMAGE, rendered by
 the renderer of ``--from``, look as the renderer of ``--to`` would render it, and with
 ``--target`` scores the result against that renderer's own image (CIEDE2000, per object).
+``environment`` estimates the lighting from the image's background (objects removed, the central
+circle read as the hemisphere behind the image plane and mirrored) and writes a lat-long map, with
+``ENV.json`` giving its ``environment.to_world`` for the design camera.
 """
 
 from __future__ import annotations
@@ -60,6 +64,14 @@ def add_parser(sub) -> None:
     t.add_argument("--target", dest="reference", type=Path,
                    help="B's own image of the scene: score the result against it")
     t.set_defaults(run=run_transfer)
+
+    e = verbs.add_parser("environment", help="estimate a lat-long environment map from an image's "
+                                             "background (the paper's recipe)")
+    e.add_argument("image", type=Path, help="linear image (.exr)")
+    e.add_argument("--geometry", type=Path, required=True, help="its geometry map (.npz): the objects")
+    e.add_argument("--out", type=Path, required=True, help="output map (.exr)")
+    e.add_argument("--width", type=int, default=256, help="map width, pixels (default %(default)s)")
+    e.set_defaults(run=run_environment)
 
 
 def _options(pairs: list[str]) -> dict:
@@ -201,4 +213,29 @@ def run_transfer(args) -> int:
                   f"(profile {b['profile']:.2f} -> {a['profile']:.2f})")
     args.out.with_suffix(".json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     print(f"abs appearance transfer: {source.renderer} -> {target.renderer} -> {args.out}")
+    return 0
+
+
+def run_environment(args) -> int:
+    from abs.appearance import read_geometry
+    from abs.appearance.background import background_to_world, environment_from_background
+    from abs.appearance.scenes import design_camera
+    from abs.errors import InputError
+    from abs.io.images import read_image, write_exr, write_png
+
+    if args.width < 8 or args.width % 2:
+        raise InputError(None, "--width", f"expected an even width of at least 8, got {args.width}")
+    if args.out.suffix.lower() != ".exr":
+        raise InputError(args.out, "--out", "expected an .exr file name")
+    image = read_image(args.image)
+    geometry = read_geometry(args.geometry, image.shape[:2])
+    env = environment_from_background(image, geometry, args.width)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    write_exr(args.out, env)
+    write_png(args.out.with_suffix(".png"), env)
+    to_world = background_to_world(design_camera(image.shape[1]).R)
+    args.out.with_suffix(".json").write_text(json.dumps(
+        {"image": str(args.image), "frame": "camera looking along +z, +y up (docs/appearance.md)",
+         "to_world_for_design_camera": to_world.tolist()}, indent=2) + "\n", encoding="utf-8")
+    print(f"abs appearance environment: -> {args.out}")
     return 0
