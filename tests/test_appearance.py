@@ -344,3 +344,32 @@ def test_environment_from_background_of_a_constant_sky():
     to_world = background_to_world(cam.R)
     # The map's centre (u = 0.5, the horizon: local direction +z) is the camera's view direction.
     np.testing.assert_allclose(to_world[:3, :3] @ [0, 0, 1], cam.R[2], atol=1e-12)
+
+
+def test_mesh_scene_geometry_matches_the_analytic_sphere():
+    """The default scene's glass sphere mesh (radius 4 cm at (0, 0.04, 0)) ray cast: the ids are
+    where the analytic sphere is, and θ agrees with the analytic one up to the tessellation."""
+    from pathlib import Path
+
+    from abs.appearance.mesh_geometry import mesh_scene_geometry
+    from abs.camera.pinhole import intrinsics_from_fov, look_at
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "default" / "scene.toml"
+    compiled = compile_scene(load_scene(scene))
+    R, t = look_at(np.array([0.0, 0.1, 0.3]), np.array([0.0, 0.04, 0.0]))
+    cam = Camera(intrinsics_from_fov(48, 36, np.radians(30)), R, t, 48, 36)
+    mesh = mesh_scene_geometry(compiled, cam, {"sphere": "glass", "cloth": "fabric"})
+    exact = sphere_geometry(cam.K, cam.R, cam.t, 48, 36, np.array([[0.0, 0.04, 0.0, 0.04]]), ("glass",))
+    on = (mesh.ids == 1) & (exact.ids == 1)
+    assert on.sum() > 0.9 * (exact.ids == 1).sum()
+    assert np.all(exact.ids[mesh.ids == 1] == 1)  # the mesh sphere lies inside the exact one
+    assert np.degrees(np.abs(mesh.theta[on] - exact.theta[on])).mean() < 3.0
+    assert (mesh.ids == 2).sum() > 0 and mesh.classes == ("glass", "fabric")
+    with pytest.raises(InputError):
+        mesh_scene_geometry(compiled, cam, {"teapot": "glass"})
+    from abs.cli.main import main
+
+    assert main(["appearance", "geometry", str(scene), "nowhere", "--class", "sphere=crystal",
+                 "--out", "unused"]) == 2

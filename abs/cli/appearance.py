@@ -4,6 +4,7 @@
     abs appearance render --renderer NAME --design heldout --out DIR
     abs appearance transfer IMAGE --geometry GEOMETRY.npz --from A.npz --to B.npz --out OUT.exr
     abs appearance environment IMAGE --geometry GEOMETRY.npz --out ENV.exr
+    abs appearance geometry SCENE CAPTURE --class OBJECT=CLASS ... --out DIR
 
 ``characterise`` renders the characterisation design with a registered renderer and writes
 ``DIR/characterisation.npz`` (the statistics), ``DIR/characterisation.json`` (a readable summary)
@@ -13,7 +14,9 @@ the renderer of ``--from``, look as the renderer of ``--to`` would render it, an
 ``--target`` scores the result against that renderer's own image (CIEDE2000, per object).
 ``environment`` estimates the lighting from the image's background (objects removed, the central
 circle read as the hemisphere behind the image plane and mirrored) and writes a lat-long map, with
-``ENV.json`` giving its ``environment.to_world`` for the design camera.
+``ENV.json`` giving its ``environment.to_world`` for the design camera. ``geometry`` writes the
+geometry maps of a scene file's objects (ray cast, :mod:`abs.appearance.mesh_geometry`) for every
+view of a capture folder, so that ``abs render``'s images of it can be transferred.
 """
 
 from __future__ import annotations
@@ -72,6 +75,16 @@ def add_parser(sub) -> None:
     e.add_argument("--out", type=Path, required=True, help="output map (.exr)")
     e.add_argument("--width", type=int, default=256, help="map width, pixels (default %(default)s)")
     e.set_defaults(run=run_environment)
+
+    g = verbs.add_parser("geometry", help="geometry maps of a scene file's objects for each view "
+                                          "of a capture folder (to transfer its renderings)")
+    g.add_argument("scene", type=Path, help="scene file (TOML)")
+    g.add_argument("capture", type=Path, help="capture folder with cameras.json")
+    g.add_argument("--class", dest="classes", action="append", required=True, metavar="OBJECT=CLASS",
+                   help="material class of an object (e.g. sphere=glass); repeatable; objects not "
+                        "named are background")
+    g.add_argument("--out", type=Path, required=True, help="folder for VIEW.npz")
+    g.set_defaults(run=run_geometry)
 
 
 def _options(pairs: list[str]) -> dict:
@@ -238,4 +251,34 @@ def run_environment(args) -> int:
         {"image": str(args.image), "frame": "camera looking along +z, +y up (docs/appearance.md)",
          "to_world_for_design_camera": to_world.tolist()}, indent=2) + "\n", encoding="utf-8")
     print(f"abs appearance environment: -> {args.out}")
+    return 0
+
+
+def run_geometry(args) -> int:
+    from abs.appearance.design import MATERIAL_CLASSES
+    from abs.appearance.files import write_geometry
+    from abs.appearance.mesh_geometry import mesh_scene_geometry
+    from abs.errors import InputError
+    from abs.io.capture import load_capture
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    classes = {}
+    for pair in args.classes:
+        name, sep, cls = pair.partition("=")
+        if not sep or not name:
+            raise InputError(None, "--class", f"expected OBJECT=CLASS, got {pair!r}")
+        if cls not in MATERIAL_CLASSES:
+            raise InputError(None, "--class", f"unknown class {cls!r}; expected one of {list(MATERIAL_CLASSES)}")
+        classes[name] = cls
+    compiled = compile_scene(load_scene(args.scene))
+    capture = load_capture(args.capture)
+    if args.out.exists() and not args.out.is_dir():
+        raise InputError(args.out, "--out", "exists and is not a folder")
+    args.out.mkdir(parents=True, exist_ok=True)
+    for view in capture.views:
+        geometry = mesh_scene_geometry(compiled, Camera.from_view(view), classes)
+        write_geometry(args.out / f"{view.name}.npz", geometry)
+        print(f"  {view.name}: {int((geometry.ids > 0).sum())} object pixels", flush=True)
+    print(f"abs appearance geometry: {len(capture.views)} views -> {args.out}")
     return 0
