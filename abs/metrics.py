@@ -16,7 +16,7 @@ import numpy as np
 from abs.errors import InputError
 from abs.colour.srgb import linear_to_srgb
 
-__all__ = ["rmse", "ssim", "log_error"]
+__all__ = ["rmse", "ssim", "log_error", "reinhard", "log_average_luminance", "ciede2000_image"]
 
 #: Error below which :func:`log_error` clamps, so that a perfect pixel maps to -6, not -inf.
 LOG_ERROR_FLOOR = 1e-6
@@ -136,3 +136,46 @@ def log_error(rendering: np.ndarray, photograph: np.ndarray) -> np.ndarray:
     a, b = _image_pair(rendering, photograph)
     distance = np.sqrt(np.sum((a - b) ** 2, axis=-1))
     return np.log10(np.maximum(distance, LOG_ERROR_FLOOR))
+
+
+# -- the structured-light study's colour difference (also abs.appearance's metric) ----------
+# Reinhard's global operator (key 0.18 on the log-average luminance of a reference image,
+# L/(1 + L) on luminance, colours scaled with it), a 2.2 display gamma, CIELAB (D65), CIEDE2000.
+
+GAMMA = 2.2
+REINHARD_KEY = 0.18
+
+
+def reinhard(rgb: np.ndarray, log_average: float) -> np.ndarray:
+    """Reinhard's global operator and a 2.2 gamma: display RGB in [0, 1].
+
+    Parameters
+    ----------
+    rgb : np.ndarray
+        (..., 3) linear RGB radiance.
+    log_average : float
+        Log-average luminance the key 0.18 is applied to (the same for images compared).
+    """
+    lum = np.maximum(rgb @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    scaled = REINHARD_KEY / log_average * lum
+    display_lum = scaled / (1.0 + scaled)
+    ratio = np.where(lum > 0.0, display_lum / np.where(lum > 0.0, lum, 1.0), 0.0)
+    return np.clip(np.maximum(rgb, 0.0) * ratio[..., None], 0.0, 1.0) ** (1.0 / GAMMA)
+
+
+def log_average_luminance(rgb: np.ndarray, delta: float = 1e-4) -> float:
+    """exp(mean(log(δ + L))) over all pixels (Reinhard et al. 2002)."""
+    lum = np.maximum(rgb @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    return float(np.exp(np.mean(np.log(delta + lum))))
+
+
+def ciede2000_image(display_a: np.ndarray, display_b: np.ndarray) -> np.ndarray:
+    """Per-pixel CIEDE2000 between two gamma-2.2 display images (..., 3) in [0, 1]."""
+    import colour
+
+    space = colour.models.RGB_COLOURSPACE_sRGB
+    labs = []
+    for display in (display_a, display_b):
+        xyz = (np.asarray(display, np.float64) ** GAMMA) @ space.matrix_RGB_to_XYZ.T
+        labs.append(colour.XYZ_to_Lab(xyz, space.whitepoint))
+    return colour.difference.delta_E_CIE2000(labs[0], labs[1])

@@ -31,7 +31,7 @@ COLUMN = {"cli": 2.0, "abs": 5.6, "studies": 4.4, "sampling": 1.0, "diagnosis": 
           "fitting": 1.0, "runs": 4.2, "model": 2.0, "simulate": 3.6, "render": 2.0,
           "scene": 1.2, "report": 4.2, "brdf": 0.8, "metrics": 4.2, "acquisition": 6.0,
           "probe": 7.8, "io": 2.4, "params": 1.0, "colour": 3.2, "camera": 6.6, "errors": 2.0,
-          "pools": 6.2, "reassembly": 5.2, "editing": 6.4, "resynthesis": 5.4}
+          "pools": 6.2, "reassembly": 5.2, "editing": 6.4, "resynthesis": 5.4, "appearance": 7.0}
 
 
 def direct(pairs: set[tuple[str, str]]) -> list[tuple[str, str]]:

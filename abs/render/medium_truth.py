@@ -21,7 +21,7 @@ from __future__ import annotations
 import mitsuba as mi
 import numpy as np
 
-__all__ = ["render_with_medium", "albedo_for_reflectance", "diffusion_length"]
+__all__ = ["render_with_medium", "albedo_for_reflectance", "diffusion_length", "mitsuba_sensor"]
 
 
 def _diffuse_reflectance(albedo: np.ndarray) -> np.ndarray:
@@ -53,7 +53,8 @@ def diffusion_length(mean_free_path: float, albedo) -> np.ndarray:
     return mean_free_path / np.sqrt(3.0 * (1.0 - np.asarray(albedo, np.float64)))
 
 
-def _sensor(camera) -> dict:
+def mitsuba_sensor(camera) -> dict:
+    """A stock Mitsuba ``perspective`` sensor (tent filter, RGB film) equal to an abs camera."""
     K = np.asarray(camera.K, np.float64)
     centred = np.allclose(K[:2, 2], [(camera.width - 1) / 2, (camera.height - 1) / 2], atol=1e-6)
     if camera.block != 1 or not np.isclose(K[0, 0], K[1, 1]) or K[0, 1] != 0 or not centred:
@@ -102,7 +103,7 @@ def render_with_medium(compiled, camera, material: str, mean_free_path: float,
     thickness = 30.0 * mean_free_path if thickness is None else thickness
     d = compiled.mitsuba_dict()
     d["integrator"] = {"type": "volpath", "max_depth": int(max_depth)}
-    d["sensor"] = _sensor(camera)
+    d["sensor"] = mitsuba_sensor(camera)
     shapes = {shape.id(): shape for shape in compiled.mitsuba_scene.shapes()}
     for obj in compiled.scene.objects:
         if obj.material != material:

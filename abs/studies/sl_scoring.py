@@ -19,6 +19,8 @@ import mitsuba as mi
 import numpy as np
 
 from abs.camera.pinhole import intrinsics_from_fov, look_at
+# The score itself lives in abs.metrics (shared with abs.appearance); re-exported here.
+from abs.metrics import GAMMA, REINHARD_KEY, ciede2000_image, log_average_luminance, reinhard  # noqa: F401
 from abs.render.bsdfs import tabulated as _tabulated  # noqa: F401  (registers abs_tabulated)
 from abs.render.camera import Camera
 from abs.render.environment import Environment
@@ -30,9 +32,6 @@ __all__ = ["DEFAULT_ENVIRONMENT", "ScoreSettings", "Scorer", "ciede2000_image", 
 DEFAULT_ENVIRONMENT = "polyhaven_hdri_1k/royal_esplanade_1k.hdr"
 """Environment map of the score, relative to the shared data folder."""
 
-GAMMA = 2.2
-REINHARD_KEY = 0.18
-
 
 @dataclass(frozen=True)
 class ScoreSettings:
@@ -42,41 +41,6 @@ class ScoreSettings:
     spp: int = 64
     seed: int = 0
     environment: str = DEFAULT_ENVIRONMENT
-
-
-def reinhard(rgb: np.ndarray, log_average: float) -> np.ndarray:
-    """Reinhard's global operator and a 2.2 gamma: display RGB in [0, 1].
-
-    Parameters
-    ----------
-    rgb : np.ndarray
-        (..., 3) linear RGB radiance.
-    log_average : float
-        Log-average luminance the key 0.18 is applied to (the same for images compared).
-    """
-    lum = np.maximum(rgb @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
-    scaled = REINHARD_KEY / log_average * lum
-    display_lum = scaled / (1.0 + scaled)
-    ratio = np.where(lum > 0.0, display_lum / np.where(lum > 0.0, lum, 1.0), 0.0)
-    return np.clip(np.maximum(rgb, 0.0) * ratio[..., None], 0.0, 1.0) ** (1.0 / GAMMA)
-
-
-def log_average_luminance(rgb: np.ndarray, delta: float = 1e-4) -> float:
-    """exp(mean(log(δ + L))) over all pixels (Reinhard et al. 2002)."""
-    lum = np.maximum(rgb @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
-    return float(np.exp(np.mean(np.log(delta + lum))))
-
-
-def ciede2000_image(display_a: np.ndarray, display_b: np.ndarray) -> np.ndarray:
-    """Per-pixel CIEDE2000 between two gamma-2.2 display images (..., 3) in [0, 1]."""
-    import colour
-
-    space = colour.models.RGB_COLOURSPACE_sRGB
-    labs = []
-    for display in (display_a, display_b):
-        xyz = (np.asarray(display, np.float64) ** GAMMA) @ space.matrix_RGB_to_XYZ.T
-        labs.append(colour.XYZ_to_Lab(xyz, space.whitepoint))
-    return colour.difference.delta_E_CIE2000(labs[0], labs[1])
 
 
 class Scorer:

@@ -1,0 +1,164 @@
+"""Transfer: make an image from renderer A look as renderer B would render it.
+
+Per object (material id) and θ bin, after the paper (issue 29): remove A's filter and apply B's.
+With ``x`` a pixel of an object of class c in bin b, channel k, ``E`` the object's mean
+(its energy) in the image and ``x̄ = x / E``:
+
+- the bin's normalised mean moves by ``λ_A − λ_B`` (B's profile over θ instead of A's),
+- its spread about that mean is scaled so its variance changes by ``ψ_B − ψ_A``,
+- the object's energy is multiplied by ``ρ``, the mean of ``α_B / α_A`` over the object's bins
+  weighted by the light in each bin of the image.
+
+A pure per-channel gain ``g`` (a white balance, an exposure) gives ``α_B = g α_A`` and unchanged
+λ, ψ, so the transfer is exactly ``x -> g x``.
+
+The spread step is off by default (``spread=False``): at the sample counts abs characterises
+with, ψ is mostly Monte-Carlo noise and fireflies, and ψ_B − ψ_A then adds noise rather than
+look (benchmarks/appearance_transfer.py measures both).
+
+Per-channel statistics cannot express a filter that mixes channels (a camera's colour matrix):
+the gain of a channel then depends on the surface's colour, and a class characterised on a red
+and a blue sample mis-predicts a green one. ``colour_matrix="global"`` first maps A's colours
+through one 3x3 matrix fitted by weighted least squares on every class's per-scene θ-profile
+means (the same design rendered by both renderers), and ``"class"`` through one matrix per class;
+the θ transfer then corrects what remains. Both need the two files to share a design.
+
+Pixels with id 0 (background, silhouettes) are left as they are; bins that either
+characterisation has no pixels in keep their normalised values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from abs.appearance.geometry import Geometry
+from abs.appearance.statistics import Characterisation, bin_moments, object_bins
+from abs.errors import InputError
+
+__all__ = ["COLOUR_MATRICES", "transfer", "colour_matrices", "check_compatible"]
+
+_MAX_SPREAD_SCALE = 4.0  # a bin whose spread would grow more than this is noise, not a filter
+COLOUR_MATRICES = ("none", "class", "global")
+"""The colour-matrix steps :func:`transfer` knows (see the module docstring)."""
+
+
+def check_compatible(source: Characterisation, target: Characterisation, need_design: bool) -> None:
+    """Refuse two characterisations a transfer cannot combine."""
+    if not np.allclose(source.theta_edges, target.theta_edges):
+        raise InputError(None, "theta_edges", "the two characterisations use different θ bins")
+    if need_design and source.design != target.design:
+        raise InputError(None, "design", f"the colour matrix needs both characterisations on one "
+                                         f"design ({source.design} vs {target.design})")
+
+
+def colour_matrices(source: Characterisation, target: Characterisation,
+                    pooled: bool = False) -> dict[str, np.ndarray]:
+    """Per class, the 3x3 matrix M minimising Σ w |M a − y|² over scenes and θ bins.
+
+    ``a`` is A's mean colour of a class in a θ bin of a characterisation scene, ``y`` B's mean
+    colour there, ``w = n / |y|²`` (relative errors, so dark bins count as much as bright ones).
+    ``pooled``: one matrix fitted on every class's bins at once (a camera's colour matrix is one
+    for all materials, and many colours condition it better). Fewer than 6 bins: the identity.
+    """
+    check_compatible(source, target, need_design=True)
+    rows = {}
+    for cls in source.classes:
+        ca, cb = source.class_index(cls), target.class_index(cls)
+        if cb is None:
+            continue
+        a, y = source.profiles[:, ca], target.profiles[:, cb]
+        n = np.minimum(source.profile_counts[:, ca], target.profile_counts[:, cb])
+        ok = (n > 0) & np.isfinite(a).all(-1) & np.isfinite(y).all(-1)
+        rows[cls] = (a[ok], y[ok], n[ok])
+    if pooled:
+        a, y, n = (np.concatenate([r[i] for r in rows.values()]) for i in range(3))
+        m = _fit(a, y, n)
+        return {cls: m for cls in rows}
+    return {cls: _fit(*r) for cls, r in rows.items()}
+
+
+def _fit(a: np.ndarray, y: np.ndarray, n: np.ndarray) -> np.ndarray:
+    if len(n) < 6:
+        return np.eye(3)
+    w = np.sqrt(n / np.maximum(np.sum(y ** 2, axis=-1), 1e-12))[:, None]
+    return np.linalg.lstsq(a * w, y * w, rcond=None)[0].T
+
+
+def _through_matrices(source: Characterisation, matrices: dict[str, np.ndarray]) -> Characterisation:
+    """``source`` as if its images had been multiplied by each class's matrix.
+
+    α follows exactly from the per-scene profiles (the sums of I are linear in I); λ and ψ are
+    kept, which is exact for a diagonal matrix and close for one that mixes channels a little.
+    """
+    alpha, profiles = source.alpha.copy(), source.profiles.copy()
+    for cls, m in matrices.items():
+        c = source.class_index(cls)
+        sums = np.nansum(source.profile_counts[:, c, :, None] * source.profiles[:, c], axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            light = sums / source.alpha[c]
+            alpha[c] = np.where(source.counts[c][:, None] > 0, (sums @ m.T) / light, np.nan)
+        profiles[:, c] = source.profiles[:, c] @ m.T
+    return replace(source, alpha=alpha, profiles=profiles)
+
+
+def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
+             target: Characterisation, colour_matrix: str = "none", spread: bool = False) -> np.ndarray:
+    """``image`` (from ``source``'s renderer) as ``target``'s renderer would show it.
+
+    Parameters
+    ----------
+    image : np.ndarray
+        ``(height, width, 3)`` linear RGB.
+    geometry : Geometry
+        θ and material ids of its pixels (same height and width).
+    source, target : Characterisation
+        Renderer A's and renderer B's statistics.
+    colour_matrix : {"none", "class", "global"}
+        The colour-matrix step first (:func:`colour_matrices`; the module docstring).
+    spread : bool
+        Also apply the spread step (ψ).
+
+    Returns
+    -------
+    np.ndarray
+        float32, same shape.
+    """
+    if image.shape[:2] != geometry.ids.shape:
+        raise InputError(None, "geometry", f"image is {image.shape[:2]}, geometry {geometry.ids.shape}")
+    if colour_matrix not in COLOUR_MATRICES:
+        raise InputError(None, "colour_matrix", f"expected one of {COLOUR_MATRICES}, got {colour_matrix!r}")
+    check_compatible(source, target, need_design=colour_matrix != "none")
+    out = np.array(image, np.float64)
+    matrices = {}
+    if colour_matrix != "none":
+        # The matrix acts first, on the raw colours, as a camera's does before its response.
+        matrices = colour_matrices(source, target, pooled=colour_matrix == "global")
+        source = _through_matrices(source, matrices)
+    n_bins = source.n_bins
+    for obj, mask, bins in object_bins(geometry, source.theta_edges):
+        cls = geometry.classes[obj - 1]
+        ca, cb = source.class_index(cls), target.class_index(cls)
+        if ca is None or cb is None:
+            raise InputError(None, "classes", f"class {cls!r} is not characterised in both files")
+        x = out[mask]
+        if cls in matrices:
+            x = x @ matrices[cls].T
+        energy = x.mean(axis=0)
+        energy = np.where(energy > 0, energy, 1.0)
+        xb = x / energy
+        n, mu, var = bin_moments(xb, bins, n_bins)
+        _, light, _ = bin_moments(x, bins, n_bins)
+        ok = (n > 0) & (source.counts[ca] > 0) & (target.counts[cb] > 0)
+        gain = np.where(ok[:, None], target.alpha[cb] / np.where(ok[:, None], source.alpha[ca], 1.0), 1.0)
+        weight = np.where(ok[:, None], n[:, None] * light, 0.0)
+        rho = np.where(weight.sum(0) > 0, (weight * gain).sum(0) / np.maximum(weight.sum(0), 1e-300), 1.0)
+        shift = np.where(ok[:, None], source.lam[ca] - target.lam[cb], 0.0)
+        var_t = np.maximum(var - np.where(ok[:, None], source.psi[ca] - target.psi[cb], 0.0), 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            scale = np.where(var > 1e-12, np.sqrt(var_t / var), 1.0)
+        scale = np.clip(np.where(ok[:, None] & spread, scale, 1.0), 0.0, _MAX_SPREAD_SCALE)
+        moved = mu[bins] + shift[bins] + (xb - mu[bins]) * scale[bins]
+        out[mask] = moved * energy * rho
+    return out.astype(np.float32)
