@@ -1,4 +1,4 @@
-"""``abs reassemble mesh|markers|place|deform|pipeline``: put glass scanned in a CT back into
+"""``abs reassemble mesh|markers|place|deform|label|pipeline``: put glass scanned in a CT back into
 its scene.
 
 ``mesh`` turns a CT volume into the cleaned glass mesh and the marker spheres (``glass.ply`` in
@@ -6,7 +6,9 @@ metres, ``markers.json`` in mm); ``markers`` finds the markers in two calibrated
 triangulates them (``markers_world.json``, metres, world frame); ``place`` pairs markers measured
 in the scene with the CT markers, solves the rigid transform and writes the object's
 ``to_world`` into a scene file; ``deform`` pushes a soft object (the tablecloth) below a hard one
-where it would poke through; ``pipeline`` runs them in that order, each as its own command would.
+where it would poke through; ``label`` gives each face of a background mesh a material label
+from segmented photographs; ``pipeline`` runs mesh, markers, place and deform in that order,
+each as its own command would.
 See docs/reassembly.md.
 """
 
@@ -23,7 +25,7 @@ from abs.errors import InputError, read_json
 
 def add_parser(sub) -> None:
     p = sub.add_parser("reassemble", help="CT volume to meshes, marker placement into a scene, "
-                                          "soft deformation")
+                                          "soft deformation, background labelling")
     steps = p.add_subparsers(dest="step", required=True)
 
     q = steps.add_parser("mesh", help="CT volume to the glass mesh and the marker spheres")
@@ -86,6 +88,31 @@ def add_parser(sub) -> None:
                    help="place even if some measured markers match no CT marker")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
     q.set_defaults(run=_run_place)
+
+    q = steps.add_parser("label", help="one material label per face of a background mesh, from "
+                                       "the photographs of a capture folder")
+    q.add_argument("mesh", type=Path, nargs="?", help="background mesh (PLY/OBJ), metres, world "
+                                                      "frame (or --scene and --object)")
+    q.add_argument("--cameras", type=Path, required=True,
+                   help="cameras.json (or its capture folder): every view's photograph is used, "
+                        "with its mask")
+    q.add_argument("--labels", type=int, required=True,
+                   help="number of materials in the photographs (the surroundings count too)")
+    q.add_argument("--images", nargs="+", metavar="VIEW=PATH",
+                   help="photographs to use instead of those cameras.json names")
+    q.add_argument("--scene", type=Path, help="scene holding the background object")
+    q.add_argument("--object", help="the background object in --scene")
+    q.add_argument("--materials", nargs="+", metavar="NAME",
+                   help="material of label 1, 2, ... (labels are numbered darkest first); with "
+                        "--scene, also writes OUT/scene.toml with the object split by label")
+    q.add_argument("--sigma-px", type=float, default=1.0, help="blur before the edges, pixels")
+    q.add_argument("--min-area-px", type=int, default=20,
+                   help="smallest region between edges that seeds the watershed, pixels")
+    q.add_argument("--max-faces", type=int, default=2_000_000,
+                   help="refuse to subdivide beyond this many faces")
+    q.add_argument("--out", type=Path, required=True,
+                   help="folder for label_<k>.ply, labels.json, scene_snippet.toml")
+    q.set_defaults(run=_run_label)
 
     q = steps.add_parser("deform", help="push a soft object below a hard one where they intersect")
     q.add_argument("--scene", type=Path, required=True)
@@ -222,23 +249,34 @@ def _run_deform(args) -> int:
     return 0
 
 
-def _marker_image(image: Path, capture, name: str, args):
-    from abs.io.images import read_image
-    from abs.reassembly.circles import detect_circles
-    from abs.reassembly.stereo_markers import MarkerImage
-
+def _view(capture, name: str):
     try:
-        view = capture.view(name)
+        return capture.view(name)
     except KeyError:
         raise InputError(capture.source, "views", f"no view named {name!r}; views are "
                                                   f"{', '.join(capture.names)}") from None
+
+
+def _calibrated_photo(image: Path, capture, view) -> np.ndarray:
+    """The photograph ``image`` of ``view``, refused unless it has the calibrated size."""
+    from abs.io.images import read_image
+
     if not image.is_file():
         raise InputError(image, "", "photograph not found")
     pixels = read_image(image)
     if pixels.shape[:2] != (view.height, view.width):
         raise InputError(image, "", f"is {pixels.shape[1]}x{pixels.shape[0]} pixels, but camera "
-                                    f"{name!r} of {capture.source} was calibrated at "
+                                    f"{view.name!r} of {capture.source} was calibrated at "
                                     f"{view.width}x{view.height}")
+    return pixels
+
+
+def _marker_image(image: Path, capture, name: str, args):
+    from abs.reassembly.circles import detect_circles
+    from abs.reassembly.stereo_markers import MarkerImage
+
+    view = _view(capture, name)
+    pixels = _calibrated_photo(image, capture, view)
     radius = tuple(args.radius_px) if args.radius_px else (4.0, None)
     return MarkerImage(name, str(image), view.K, view.R, view.t, detect_circles(pixels, radius_px=radius))
 
@@ -281,6 +319,58 @@ def _run_markers(args) -> int:
     print(f"{len(result.points_m)} markers (detections: "
           f"{', '.join(f'{m.name} {len(m.circles)}' for m in images)}; reprojection error at most "
           f"{result.error_px.max():.3f} px) -> {args.out}")
+    return 0
+
+
+def _run_label(args) -> int:
+    import trimesh
+
+    from abs.io.capture import load_capture
+    from abs.reassembly.label_files import replace_with_labels, write_labelling
+    from abs.reassembly.labelling import LabelCamera, label_mesh
+    from abs.reassembly.segmentation import label_regions, segment_photograph
+    from abs.scene import load_scene
+
+    capture = load_capture(args.cameras)
+    if (args.mesh is None) == (args.scene is None or args.object is None):
+        raise InputError(None, "mesh", "give either a mesh file or --scene and --object (the "
+                                       "background object of a scene)")
+    if args.mesh is not None:
+        if not args.mesh.is_file():
+            raise InputError(args.mesh, "", "mesh not found")
+        mesh = trimesh.load(args.mesh, force="mesh", process=False)
+    else:
+        try:
+            mesh = _world_mesh(load_scene(args.scene).object(args.object))
+        except KeyError:
+            raise InputError(args.scene, "objects", f"no object {args.object!r}") from None
+    images = {}
+    for item in args.images or []:
+        name, sep, path = item.partition("=")
+        if not sep:
+            raise InputError(None, "--images", f"expected VIEW=PATH, got {item!r}")
+        images[_view(capture, name).name] = Path(path)
+    segmentations, views = [], []
+    for i, view in enumerate(capture.views):
+        path = images.get(view.name, view.image)
+        pixels = _calibrated_photo(path, capture, view)
+        segmentations.append(segment_photograph(pixels, view.read_mask(), sigma_px=args.sigma_px,
+                                                min_area_px=args.min_area_px, source=path))
+        views.append((i, view))
+    label_images, colours = label_regions(segmentations, args.labels)
+    cameras = [LabelCamera(v.name, v.K, v.R, v.t, lab, str(capture.source), f"views[{i}]")
+               for (i, v), lab in zip(views, label_images)]
+    result = label_mesh(mesh, cameras, args.labels, max_faces=args.max_faces)
+    report = write_labelling(result, colours, args.out, args.materials, name=args.object or "background")
+    counts = np.bincount(result.face_labels, minlength=args.labels + 1)[1:]
+    print(f"{len(result.face_labels)} faces after {result.rounds} subdivision rounds (longest edge "
+          f"{result.worst_edge_px:.2f} pixel footprints); per label: "
+          f"{', '.join(f'{k}: {c}' for k, c in enumerate(counts, start=1))}; "
+          f"{int(np.count_nonzero(~result.voted))} by nearest neighbour -> {report}")
+    if args.scene is not None and args.materials:
+        out = replace_with_labels(args.scene, args.out / "scene.toml", args.object or "background",
+                                  args.out, args.materials)
+        print(f"scene with {args.object} split by label -> {out}")
     return 0
 
 
