@@ -128,6 +128,22 @@ def test_reassemble_label_command(rendered, tmp_path, capsys):
                      + (out / "scene_snippet.toml").read_text())
     loaded = load_scene(scene)
     assert len(loaded.objects) == sum(1 for e in report["labels"] if e["faces"])
+    # --scene/--object/--materials: the background object replaced by one object per label
+    names = [n for n, _ in REGIONS] + ["dark"]
+    source = tmp_path / "background.toml"
+    source.write_text(f'[environment]\nfile = "{(capture / "cam0.exr").as_posix()}"\n\n'
+                      + "".join(f'[materials.{n}]\ntype = "diffuse"\nreflectance = [0.5, 0.5, 0.5]\n\n' for n in names)
+                      + f'[[objects]]\nname = "background"\nmesh = "{mesh.as_posix()}"\nmaterial = "dark"\n')
+    assert main(["reassemble", "label", "--scene", str(source), "--object", "background",
+                 "--cameras", str(capture), "--labels", str(N_LABELS), "--out", str(tmp_path / "split"),
+                 "--materials", *names]) == 0
+    split = load_scene(tmp_path / "split" / "scene.toml")
+    parts = {o.name: o.material for o in split.objects}
+    assert "background" not in parts and parts["background_4"] == names[3]
+    assert main(["reassemble", "label", "--scene", str(source), "--object", "background",
+                 "--cameras", str(capture), "--labels", str(N_LABELS), "--out", str(tmp_path / "x"),
+                 "--materials", *names[:-1], "nope"]) == 2
+    assert "materials.nope: no such material" in capsys.readouterr().err
     # a photograph of another size than the calibration names the file and the sizes
     small = tmp_path / "small.png"
     cv2.imwrite(str(small), np.full((30, 40, 3), 200, np.uint8))
