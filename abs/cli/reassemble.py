@@ -67,6 +67,8 @@ def add_parser(sub) -> None:
     q.add_argument("--max-edge", type=float, default=2.0,
                    help="refine the soft mesh to edges of at most this, mm")
     q.add_argument("--rounds", type=int, default=4, help="sqrt(3)-subdivision + decimation rounds")
+    q.add_argument("--drop-suspect", action="store_true",
+                   help="leave out markers the others' placement puts far off (see place)")
     q.add_argument("--work", type=Path, help="folder for the intermediate files "
                                              "(default: <out folder>/reassembly)")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
@@ -86,6 +88,9 @@ def add_parser(sub) -> None:
     q.add_argument("--tol", type=float, default=1.5, help="pairing tolerance, mm")
     q.add_argument("--allow-unpaired", action="store_true",
                    help="place even if some measured markers match no CT marker")
+    q.add_argument("--drop-suspect", action="store_true",
+                   help="leave out the markers that the others' placement puts far off (a marker "
+                        "merged with its image through the glass); they are reported either way")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
     q.set_defaults(run=_run_place)
 
@@ -197,17 +202,33 @@ def _run_place(args) -> int:
     from abs.reassembly.meshing import read_markers
     from abs.reassembly.placement import place
     from abs.reassembly.scene_pose import place_object_in_scene
+    from abs.reassembly.suspect_markers import suspect_pairs
 
     centres_mm, _ = read_markers(args.markers)
     measured = _read_points(args.measured)
-    result = place(measured, centres_mm * 1e-3, _parse_pairs(args.pairs), tol=args.tol * 1e-3,
+    ct = centres_mm * 1e-3
+    result = place(measured, ct, _parse_pairs(args.pairs), tol=args.tol * 1e-3,
                    allow_unpaired=args.allow_unpaired)
+    suspect, loo = suspect_pairs(measured, ct, result.pairs)
+    for (m, c), r in zip(result.pairs[suspect], loo[suspect]):
+        print(f"suspect: measured {m} <-> CT {c} is {r:.3f} mm off when the other markers place the "
+              f"object (their median {np.nanmedian(np.delete(loo, np.flatnonzero(suspect))):.3f} mm): a "
+              "marker merged with its own image seen through the glass, or a false detection"
+              + ("; left out" if args.drop_suspect else "; kept (--drop-suspect leaves it out)"))
+    flagged, pairs_all = result.pairs[suspect], result.pairs
+    if args.drop_suspect and suspect.any():
+        if np.count_nonzero(~suspect) < 3:
+            raise InputError(args.measured, "points_m", "fewer than 3 matched markers would be left "
+                                                        "without the suspect ones")
+        result = place(measured, ct, result.pairs[~suspect], tol=args.tol * 1e-3)
     folder = args.markers if args.markers.is_dir() else args.markers.parent
     mesh = args.mesh or folder / "glass.ply"
     out = place_object_in_scene(args.scene, args.out, args.object, result.to_world, mesh, args.material)
     report = {"pairs": result.pairs.tolist(), "residuals_mm": result.residuals_mm.tolist(),
               "mean_distance_mm": result.mean_distance_mm, "rms_mm": result.rms_mm,
-              "to_world": result.to_world.tolist(), "scene": str(out)}
+              "to_world": result.to_world.tolist(), "scene": str(out),
+              "leave_one_out_mm": [[int(m), int(c), float(r)] for (m, c), r in zip(pairs_all, loo)],
+              "suspect": flagged.tolist(), "suspect_left_out": bool(args.drop_suspect and len(flagged))}
     placement = out.with_name(out.stem + "_placement.json")
     placement.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     for (m, c), r in zip(result.pairs, result.residuals_mm):
@@ -413,7 +434,7 @@ def _run_pipeline(args) -> int:
                "--out", str(checked)])
     print("== place")
     place[place.index("--measured") + 1] = str(checked)
-    _run_step(["place", *place])
+    _run_step(["place", *place] + (["--drop-suspect"] if args.drop_suspect else []))
     if args.soft:
         print("== deform")
         _run_step(["deform", "--scene", str(args.out), "--hard", args.object, "--soft", args.soft,
