@@ -347,7 +347,7 @@ def _run_label(args) -> int:
     import trimesh
 
     from abs.io.capture import load_capture
-    from abs.reassembly.label_files import replace_with_labels, write_labelling
+    from abs.reassembly.label_files import check_label_scene, replace_with_labels, write_labelling
     from abs.reassembly.labelling import LabelCamera, label_mesh
     from abs.reassembly.segmentation import label_regions, segment_photograph
     from abs.scene import load_scene
@@ -356,6 +356,10 @@ def _run_label(args) -> int:
     if (args.mesh is None) == (args.scene is None or args.object is None):
         raise InputError(None, "mesh", "give either a mesh file or --scene and --object (the "
                                        "background object of a scene)")
+    if args.materials and len(args.materials) != args.labels:
+        raise InputError(None, "--materials", f"{len(args.materials)} names for {args.labels} labels")
+    if args.scene is not None and args.materials:
+        check_label_scene(args.scene, args.object, args.materials)  # before the work, not after
     if args.mesh is not None:
         if not args.mesh.is_file():
             raise InputError(args.mesh, "", "mesh not found")

@@ -18,7 +18,7 @@ from abs.reassembly.labelling import LabelResult
 from abs.scene import load_scene, write_scene
 from abs.scene.scene import ObjectSpec
 
-__all__ = ["write_labelling", "replace_with_labels"]
+__all__ = ["write_labelling", "check_label_scene", "replace_with_labels"]
 
 
 def write_labelling(result: LabelResult, colours: np.ndarray, out: str | Path,
@@ -86,10 +86,8 @@ def write_labelling(result: LabelResult, colours: np.ndarray, out: str | Path,
     return path
 
 
-def replace_with_labels(scene_path: str | Path, out: str | Path, name: str, folder: str | Path,
-                        materials: list[str]) -> Path:
-    """Write ``out``: the scene of ``scene_path`` with object ``name`` replaced by one object per
-    label (``<name>_<k>``, mesh ``folder/label_<k>.ply``, material ``materials[k - 1]``).
+def check_label_scene(scene_path: str | Path, name: str, materials: list[str]):
+    """The scene of ``scene_path``, checked to hold object ``name`` and every material named.
 
     Raises
     ------
@@ -104,6 +102,21 @@ def replace_with_labels(scene_path: str | Path, out: str | Path, name: str, fold
         if m not in scene.materials:
             raise InputError(scene_path, f"materials.{m}", "no such material; the scene has "
                                                           f"{', '.join(sorted(scene.materials))}")
+    return scene
+
+
+def replace_with_labels(scene_path: str | Path, out: str | Path, name: str, folder: str | Path,
+                        materials: list[str]) -> Path:
+    """Write ``out``: the scene of ``scene_path`` with object ``name`` replaced by one object per
+    label (``<name>_<k>``, mesh ``folder/label_<k>.ply``, material ``materials[k - 1]``).
+
+    Raises
+    ------
+    InputError
+        No object ``name``, or a material the scene does not define.
+    """
+    scene = check_label_scene(scene_path, name, materials)
+    names = [o.name for o in scene.objects]
     # the labelled meshes are in the world frame (the cameras'): the parts get no to_world
     parts = [ObjectSpec(f"{name}_{k}", (Path(folder) / f"label_{k}.ply").resolve(), m, np.eye(4))
              for k, m in enumerate(materials, start=1) if (Path(folder) / f"label_{k}.ply").is_file()]
