@@ -16,7 +16,9 @@ true object-frame centres (the CT step's own error is measured by ``benchmarks/r
 Reported: detections per image, markers triangulated, left out as ambiguous or seen through glass,
 each kept marker's distance from the truth (mm) and reprojection error (px), the mean marker
 distance after placement (the seed's 0.43 mm), the rotation (deg) and translation (mm) errors,
-render and stereo times. Writes ``benchmarks/results/reassembly_stereo.json`` and ``.md``.
+each marker's leave-one-out residual, the suspect markers (abs.reassembly.suspect_markers) and
+the placement without them, render and stereo times. With ``--keep-images DIR`` the renderings
+are kept there and reused by a later run with the same size, spp and seed. Writes ``benchmarks/results/reassembly_stereo.json`` and ``.md``.
 
     PYTHONPATH=. python benchmarks/reassembly_stereo.py [--width 1280] [--spp 32] [--seed 0]
 """
