@@ -16,7 +16,9 @@ true object-frame centres (the CT step's own error is measured by ``benchmarks/r
 Reported: detections per image, markers triangulated, left out as ambiguous or seen through glass,
 each kept marker's distance from the truth (mm) and reprojection error (px), the mean marker
 distance after placement (the seed's 0.43 mm), the rotation (deg) and translation (mm) errors,
-render and stereo times. Writes ``benchmarks/results/reassembly_stereo.json`` and ``.md``.
+each marker's leave-one-out residual, the suspect markers (abs.reassembly.suspect_markers) and
+the placement without them, render and stereo times. With ``--keep-images DIR`` the renderings
+are kept there and reused by a later run with the same size, spp and seed. Writes ``benchmarks/results/reassembly_stereo.json`` and ``.md``.
 
     PYTHONPATH=. python benchmarks/reassembly_stereo.py [--width 1280] [--spp 32] [--seed 0]
 """
@@ -40,6 +42,7 @@ from abs.reassembly.circles import detect_circles
 from abs.reassembly.phantom import random_directions
 from abs.reassembly.placement import place
 from abs.reassembly.stereo_markers import MarkerImage, locate_markers
+from abs.reassembly.suspect_markers import suspect_pairs
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ROOT / "scenes" / "default"
@@ -98,14 +101,17 @@ def render_views(scene_path: Path, width: int, height: int, spp: int) -> tuple[l
 
     set_variant(None)
     compiled = compile_scene(load_scene(scene_path))
-    K = intrinsics_from_fov(width, height, np.radians(FOV_DEG))
-    cams, images = [], []
+    cams, images = cameras(width, height), []
     start = time.perf_counter()
-    for i, eye in enumerate(EYES):
-        R, t = look_at(eye, CENTRE)
-        cams.append((K, R, t))
+    for i, (K, R, t) in enumerate(cams):
         images.append(compiled.render(Camera(K, R, t, width, height), spp=spp, seed=100 + i).numpy())
     return cams, images, time.perf_counter() - start
+
+
+def cameras(width: int, height: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The two cameras ``(K, R, t)``, looking at the sphere's centre from ``EYES``."""
+    K = intrinsics_from_fov(width, height, np.radians(FOV_DEG))
+    return [(K, *look_at(eye, CENTRE)) for eye in EYES]
 
 
 def run(width: int, spp: int, seed: int, keep: Path | None) -> dict:
@@ -113,9 +119,14 @@ def run(width: int, spp: int, seed: int, keep: Path | None) -> dict:
     ct, R0 = layout(seed)
     t0 = CENTRE  # object frame: the sphere's centre at the origin
     world = ct @ R0.T + t0
-    with tempfile.TemporaryDirectory() as tmp:
-        folder = Path(tmp)
-        cams, images, render_s = render_views(scene_file(folder, world, spp), width, height, spp)
+    cached = [keep / f"stereo_cam{i}_{width}_{spp}_{seed}.npy" for i in range(len(EYES))] if keep else []
+    if cached and all(p.is_file() for p in cached):
+        # renderings kept by an earlier run (--keep-images): same scene, cameras and seeds
+        cams = cameras(width, height)
+        images, render_s = [np.load(p) for p in cached], float("nan")
+    else:
+        with tempfile.TemporaryDirectory() as tmp:
+            cams, images, render_s = render_views(scene_file(Path(tmp), world, spp), width, height, spp)
     if keep is not None:
         from abs.io.images import write_png
 
@@ -152,6 +163,16 @@ def run(width: int, spp: int, seed: int, keep: Path | None) -> dict:
             nearest = np.argmin(np.linalg.norm(found.points_m[:, None] - world[None], axis=2), axis=1)
             out["pairs"] = p.pairs.tolist()
             out["pairs_right"] = bool(np.all(nearest[p.pairs[:, 0]] == p.pairs[:, 1]))
+            # the suspect-marker test: which markers it flags, and the placement without them
+            suspect, loo = suspect_pairs(found.points_m, ct, p.pairs)
+            out["leave_one_out_mm"] = loo.tolist()
+            out["suspect_truth_distance_mm"] = [out["truth_distance_mm"][m] for m in p.pairs[suspect, 0]]
+            if suspect.any() and np.count_nonzero(~suspect) >= 3:
+                q = place(found.points_m, ct, pairs=p.pairs[~suspect])
+                out["without_suspect"] = {
+                    "mean_marker_distance_mm": q.mean_distance_mm,
+                    "rotation_error_deg": float(np.degrees(Rotation.from_matrix(q.R @ R0.T).magnitude())),
+                    "translation_error_mm": float(np.linalg.norm(q.t - t0) * 1e3)}
     return out
 
 
@@ -162,19 +183,30 @@ def markdown(rows: list[dict]) -> str:
              "tracer (Mitsuba, CPU). Seed's target: mean marker distance 0.43 mm.", "",
              "| size, spp, seed | render | detections | triangulated / ambiguous / through glass | "
              "distance from truth mean / max | mean marker distance | pairing right | "
-             "rotation / translation error |",
-             "|---|---|---|---|---|---|---|---|"]
+             "rotation / translation error | suspect (its distance from truth) | "
+             "without the suspect: mean distance, rotation / translation error |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         dist = r.get("truth_distance_mm", [np.nan])
         placed = (f"{r['mean_marker_distance_mm']:.3f} mm" if "mean_marker_distance_mm" in r
                   else r.get("placement_error", "not placed (fewer than 3)"))
         err = (f"{r['rotation_error_deg']:.3f} deg / {r['translation_error_mm']:.3f} mm"
                if "rotation_error_deg" in r else "-")
-        lines.append(f"| {r['width']}x{r['height']}, {r['spp']}, {r['seed']} | {r['render_s']:.0f} s | "
+        render = "reused" if np.isnan(r["render_s"]) else f"{r['render_s']:.0f} s"
+        lines.append(f"| {r['width']}x{r['height']}, {r['spp']}, {r['seed']} | {render} | "
                      f"{' / '.join(map(str, r['detections']))} | {r['triangulated']} / {r['ambiguous']} / "
                      f"{r['through_glass']} | {np.mean(dist):.3f} / {np.max(dist):.3f} mm | {placed} | "
-                     f"{r.get('pairs_right', '-')} | {err} |")
+                     f"{r.get('pairs_right', '-')} | {err} | {_suspect(r)} |")
     return "\n".join(lines) + "\n"
+
+
+def _suspect(r: dict) -> str:
+    if "leave_one_out_mm" not in r:
+        return "- | -"
+    flagged = ", ".join(f"{d:.2f} mm" for d in r["suspect_truth_distance_mm"]) or "none"
+    w = r.get("without_suspect")
+    return flagged + " | " + (f"{w['mean_marker_distance_mm']:.3f} mm, {w['rotation_error_deg']:.3f} deg / "
+                              f"{w['translation_error_mm']:.3f} mm" if w else "-")
 
 
 def main() -> None:
@@ -182,7 +214,8 @@ def main() -> None:
     parser.add_argument("--width", type=int, nargs="+", default=[1280])
     parser.add_argument("--spp", type=int, default=32)
     parser.add_argument("--seed", type=int, nargs="+", default=[0])
-    parser.add_argument("--keep-images", type=Path, help="write the renderings as PNG here")
+    parser.add_argument("--keep-images", type=Path, help="write the renderings here (PNG, and .npy "
+                                                         "that a later run with the same settings reuses)")
     parser.add_argument("--results", type=Path, default=RESULTS, help="JSON to write (and .md beside it)")
     args = parser.parse_args()
     rows = []

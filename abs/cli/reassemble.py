@@ -1,4 +1,4 @@
-"""``abs reassemble mesh|markers|place|deform|pipeline``: put glass scanned in a CT back into
+"""``abs reassemble mesh|markers|place|deform|label|pipeline``: put glass scanned in a CT back into
 its scene.
 
 ``mesh`` turns a CT volume into the cleaned glass mesh and the marker spheres (``glass.ply`` in
@@ -6,7 +6,9 @@ metres, ``markers.json`` in mm); ``markers`` finds the markers in two calibrated
 triangulates them (``markers_world.json``, metres, world frame); ``place`` pairs markers measured
 in the scene with the CT markers, solves the rigid transform and writes the object's
 ``to_world`` into a scene file; ``deform`` pushes a soft object (the tablecloth) below a hard one
-where it would poke through; ``pipeline`` runs them in that order, each as its own command would.
+where it would poke through; ``label`` gives each face of a background mesh a material label
+from segmented photographs; ``pipeline`` runs mesh, markers, place and deform in that order,
+each as its own command would.
 See docs/reassembly.md.
 """
 
@@ -23,7 +25,7 @@ from abs.errors import InputError, read_json
 
 def add_parser(sub) -> None:
     p = sub.add_parser("reassemble", help="CT volume to meshes, marker placement into a scene, "
-                                          "soft deformation")
+                                          "soft deformation, background labelling")
     steps = p.add_subparsers(dest="step", required=True)
 
     q = steps.add_parser("mesh", help="CT volume to the glass mesh and the marker spheres")
@@ -65,6 +67,8 @@ def add_parser(sub) -> None:
     q.add_argument("--max-edge", type=float, default=2.0,
                    help="refine the soft mesh to edges of at most this, mm")
     q.add_argument("--rounds", type=int, default=4, help="sqrt(3)-subdivision + decimation rounds")
+    q.add_argument("--drop-suspect", action="store_true",
+                   help="leave out markers the others' placement puts far off (see place)")
     q.add_argument("--work", type=Path, help="folder for the intermediate files "
                                              "(default: <out folder>/reassembly)")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
@@ -84,8 +88,36 @@ def add_parser(sub) -> None:
     q.add_argument("--tol", type=float, default=1.5, help="pairing tolerance, mm")
     q.add_argument("--allow-unpaired", action="store_true",
                    help="place even if some measured markers match no CT marker")
+    q.add_argument("--drop-suspect", action="store_true",
+                   help="leave out the markers that the others' placement puts far off (a marker "
+                        "merged with its image through the glass); they are reported either way")
     q.add_argument("--out", type=Path, required=True, help="scene file to write")
     q.set_defaults(run=_run_place)
+
+    q = steps.add_parser("label", help="one material label per face of a background mesh, from "
+                                       "the photographs of a capture folder")
+    q.add_argument("mesh", type=Path, nargs="?", help="background mesh (PLY/OBJ), metres, world "
+                                                      "frame (or --scene and --object)")
+    q.add_argument("--cameras", type=Path, required=True,
+                   help="cameras.json (or its capture folder): every view's photograph is used, "
+                        "with its mask")
+    q.add_argument("--labels", type=int, required=True,
+                   help="number of materials in the photographs (the surroundings count too)")
+    q.add_argument("--images", nargs="+", metavar="VIEW=PATH",
+                   help="photographs to use instead of those cameras.json names")
+    q.add_argument("--scene", type=Path, help="scene holding the background object")
+    q.add_argument("--object", help="the background object in --scene")
+    q.add_argument("--materials", nargs="+", metavar="NAME",
+                   help="material of label 1, 2, ... (labels are numbered darkest first); with "
+                        "--scene, also writes OUT/scene.toml with the object split by label")
+    q.add_argument("--sigma-px", type=float, default=1.0, help="blur before the edges, pixels")
+    q.add_argument("--min-area-px", type=int, default=20,
+                   help="smallest region between edges that seeds the watershed, pixels")
+    q.add_argument("--max-faces", type=int, default=2_000_000,
+                   help="refuse to subdivide beyond this many faces")
+    q.add_argument("--out", type=Path, required=True,
+                   help="folder for label_<k>.ply, labels.json, scene_snippet.toml")
+    q.set_defaults(run=_run_label)
 
     q = steps.add_parser("deform", help="push a soft object below a hard one where they intersect")
     q.add_argument("--scene", type=Path, required=True)
@@ -170,17 +202,33 @@ def _run_place(args) -> int:
     from abs.reassembly.meshing import read_markers
     from abs.reassembly.placement import place
     from abs.reassembly.scene_pose import place_object_in_scene
+    from abs.reassembly.suspect_markers import suspect_pairs
 
     centres_mm, _ = read_markers(args.markers)
     measured = _read_points(args.measured)
-    result = place(measured, centres_mm * 1e-3, _parse_pairs(args.pairs), tol=args.tol * 1e-3,
+    ct = centres_mm * 1e-3
+    result = place(measured, ct, _parse_pairs(args.pairs), tol=args.tol * 1e-3,
                    allow_unpaired=args.allow_unpaired)
+    suspect, loo = suspect_pairs(measured, ct, result.pairs)
+    for (m, c), r in zip(result.pairs[suspect], loo[suspect]):
+        print(f"suspect: measured {m} <-> CT {c} is {r:.3f} mm off when the other markers place the "
+              f"object (their median {np.nanmedian(np.delete(loo, np.flatnonzero(suspect))):.3f} mm): a "
+              "marker merged with its own image seen through the glass, or a false detection"
+              + ("; left out" if args.drop_suspect else "; kept (--drop-suspect leaves it out)"))
+    flagged, pairs_all = result.pairs[suspect], result.pairs
+    if args.drop_suspect and suspect.any():
+        if np.count_nonzero(~suspect) < 3:
+            raise InputError(args.measured, "points_m", "fewer than 3 matched markers would be left "
+                                                        "without the suspect ones")
+        result = place(measured, ct, result.pairs[~suspect], tol=args.tol * 1e-3)
     folder = args.markers if args.markers.is_dir() else args.markers.parent
     mesh = args.mesh or folder / "glass.ply"
     out = place_object_in_scene(args.scene, args.out, args.object, result.to_world, mesh, args.material)
     report = {"pairs": result.pairs.tolist(), "residuals_mm": result.residuals_mm.tolist(),
               "mean_distance_mm": result.mean_distance_mm, "rms_mm": result.rms_mm,
-              "to_world": result.to_world.tolist(), "scene": str(out)}
+              "to_world": result.to_world.tolist(), "scene": str(out),
+              "leave_one_out_mm": [[int(m), int(c), float(r)] for (m, c), r in zip(pairs_all, loo)],
+              "suspect": flagged.tolist(), "suspect_left_out": bool(args.drop_suspect and len(flagged))}
     placement = out.with_name(out.stem + "_placement.json")
     placement.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
     for (m, c), r in zip(result.pairs, result.residuals_mm):
@@ -222,23 +270,34 @@ def _run_deform(args) -> int:
     return 0
 
 
-def _marker_image(image: Path, capture, name: str, args):
-    from abs.io.images import read_image
-    from abs.reassembly.circles import detect_circles
-    from abs.reassembly.stereo_markers import MarkerImage
-
+def _view(capture, name: str):
     try:
-        view = capture.view(name)
+        return capture.view(name)
     except KeyError:
         raise InputError(capture.source, "views", f"no view named {name!r}; views are "
                                                   f"{', '.join(capture.names)}") from None
+
+
+def _calibrated_photo(image: Path, capture, view) -> np.ndarray:
+    """The photograph ``image`` of ``view``, refused unless it has the calibrated size."""
+    from abs.io.images import read_image
+
     if not image.is_file():
         raise InputError(image, "", "photograph not found")
     pixels = read_image(image)
     if pixels.shape[:2] != (view.height, view.width):
         raise InputError(image, "", f"is {pixels.shape[1]}x{pixels.shape[0]} pixels, but camera "
-                                    f"{name!r} of {capture.source} was calibrated at "
+                                    f"{view.name!r} of {capture.source} was calibrated at "
                                     f"{view.width}x{view.height}")
+    return pixels
+
+
+def _marker_image(image: Path, capture, name: str, args):
+    from abs.reassembly.circles import detect_circles
+    from abs.reassembly.stereo_markers import MarkerImage
+
+    view = _view(capture, name)
+    pixels = _calibrated_photo(image, capture, view)
     radius = tuple(args.radius_px) if args.radius_px else (4.0, None)
     return MarkerImage(name, str(image), view.K, view.R, view.t, detect_circles(pixels, radius_px=radius))
 
@@ -284,6 +343,62 @@ def _run_markers(args) -> int:
     return 0
 
 
+def _run_label(args) -> int:
+    import trimesh
+
+    from abs.io.capture import load_capture
+    from abs.reassembly.label_files import check_label_scene, replace_with_labels, write_labelling
+    from abs.reassembly.labelling import LabelCamera, label_mesh
+    from abs.reassembly.segmentation import label_regions, segment_photograph
+    from abs.scene import load_scene
+
+    capture = load_capture(args.cameras)
+    if (args.mesh is None) == (args.scene is None or args.object is None):
+        raise InputError(None, "mesh", "give either a mesh file or --scene and --object (the "
+                                       "background object of a scene)")
+    if args.materials and len(args.materials) != args.labels:
+        raise InputError(None, "--materials", f"{len(args.materials)} names for {args.labels} labels")
+    if args.scene is not None and args.materials:
+        check_label_scene(args.scene, args.object, args.materials)  # before the work, not after
+    if args.mesh is not None:
+        if not args.mesh.is_file():
+            raise InputError(args.mesh, "", "mesh not found")
+        mesh = trimesh.load(args.mesh, force="mesh", process=False)
+    else:
+        try:
+            mesh = _world_mesh(load_scene(args.scene).object(args.object))
+        except KeyError:
+            raise InputError(args.scene, "objects", f"no object {args.object!r}") from None
+    images = {}
+    for item in args.images or []:
+        name, sep, path = item.partition("=")
+        if not sep:
+            raise InputError(None, "--images", f"expected VIEW=PATH, got {item!r}")
+        images[_view(capture, name).name] = Path(path)
+    segmentations, views = [], []
+    for i, view in enumerate(capture.views):
+        path = images.get(view.name, view.image)
+        pixels = _calibrated_photo(path, capture, view)
+        segmentations.append(segment_photograph(pixels, view.read_mask(), sigma_px=args.sigma_px,
+                                                min_area_px=args.min_area_px, source=path))
+        views.append((i, view))
+    label_images, colours = label_regions(segmentations, args.labels)
+    cameras = [LabelCamera(v.name, v.K, v.R, v.t, lab, str(capture.source), f"views[{i}]")
+               for (i, v), lab in zip(views, label_images)]
+    result = label_mesh(mesh, cameras, args.labels, max_faces=args.max_faces)
+    report = write_labelling(result, colours, args.out, args.materials, name=args.object or "background")
+    counts = np.bincount(result.face_labels, minlength=args.labels + 1)[1:]
+    print(f"{len(result.face_labels)} faces after {result.rounds} subdivision rounds (longest edge "
+          f"{result.worst_edge_px:.2f} pixel footprints); per label: "
+          f"{', '.join(f'{k}: {c}' for k, c in enumerate(counts, start=1))}; "
+          f"{int(np.count_nonzero(~result.voted))} by nearest neighbour -> {report}")
+    if args.scene is not None and args.materials:
+        out = replace_with_labels(args.scene, args.out / "scene.toml", args.object or "background",
+                                  args.out, args.materials)
+        print(f"scene with {args.object} split by label -> {out}")
+    return 0
+
+
 def _run_step(argv: list[str]) -> int:
     """Run ``abs reassemble <argv>`` with the step's own parser, defaults and checks: the
     pipeline is the steps, not a copy of them."""
@@ -323,7 +438,7 @@ def _run_pipeline(args) -> int:
                "--out", str(checked)])
     print("== place")
     place[place.index("--measured") + 1] = str(checked)
-    _run_step(["place", *place])
+    _run_step(["place", *place] + (["--drop-suspect"] if args.drop_suspect else []))
     if args.soft:
         print("== deform")
         _run_step(["deform", "--scene", str(args.out), "--hard", args.object, "--soft", args.soft,
