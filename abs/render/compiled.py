@@ -78,7 +78,7 @@ class CompiledScene:
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
                                        spec.inverse_distance, spec.center, spec.orientation)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
-                             scene.sensor.colour_matrix)
+                             scene.sensor.colour_matrix, scene.sensor.intrinsics_offset)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}

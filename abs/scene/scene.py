@@ -63,6 +63,12 @@ class SensorSpec:
         The 3x3 matrix ``M``, row-major, that takes the rendering's linear RGB to the
         photographs' (``out_i = sum_j M_ij in_j``, dimensionless); the identity is no colour
         transform. Applied after vignetting and stray light, before the response.
+    intrinsics_offset : ndarray, shape (3,)
+        ``[dcx, dcy, dfx]``, pixels of the full-resolution photographs: the photographs' camera
+        matrix minus the calibrated one (``cameras.json``): principal point moved by
+        ``(dcx, dcy)``, focal length ``fx`` by ``dfx`` with ``fy`` and the skew scaled alike;
+        zeros: the calibration is right. Rendered as a resampling of the image (exact for a
+        pinhole; ``abs.render.sensor``), applied first.
     """
 
     # field: (size, unit, lower, upper, null value: one number for every entry, or ``size``
@@ -74,12 +80,16 @@ class SensorSpec:
         # A real camera's colour matrix can have negative entries (cross-talk correction), so
         # no entry is bounded.
         "colour_matrix": (9, "1", -float("inf"), float("inf"), tuple(np.eye(3).ravel())),
+        # Bounded to offsets a calibration could plausibly miss by; beyond them the resampling's
+        # clamped border would dominate.
+        "intrinsics_offset": (3, "px", -50.0, 50.0, 0.0),
     }
 
     vignetting: np.ndarray = field(default_factory=lambda: np.zeros(2))
     response: np.ndarray = field(default_factory=lambda: np.ones(3))
     stray_light: np.ndarray = field(default_factory=lambda: np.zeros(3))
     colour_matrix: np.ndarray = field(default_factory=lambda: np.eye(3).ravel())
+    intrinsics_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @staticmethod
     def null(name: str) -> np.ndarray:
