@@ -55,7 +55,7 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     assert {"vignetting", "camera_response", "stray_light", "env_distance",
             "subsurface", "camera_misalignment"} <= {c.effect for c in pool}
     if "glass" in scene.materials:
-        assert {"absorption", "surface_roughness"} <= {c.effect for c in pool}
+        assert {"absorption", "surface_roughness", "surface_detail"} <= {c.effect for c in pool}
     else:
         assert "pose" in {c.effect for c in pool}
     extended = extend_scene(scene, tuple(pool), {}, tmp_path / "extended.toml")
