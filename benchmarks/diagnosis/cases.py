@@ -9,6 +9,9 @@ Two scenes, built on the fly:
   reflects a different fraction of light than its nominal reflectance, which a user would fit);
 - ``box``: a painted box and a clear glass sphere on the cloth in front of the checkerboard;
   fitted: ``environment.scale`` and the paint's reflectance.
+- ``noisy``: the sphere scene whose glass mesh is a scan of the sphere with noise
+  (``sphere_noisy.ply``: the same vertices moved along their radii by 0.5 mm, RMS); fitted:
+  ``environment.scale``.
 """
 
 from __future__ import annotations
@@ -18,6 +21,9 @@ from pathlib import Path
 
 
 __all__ = ["Case", "CASES", "QUICK", "build_scene"]
+
+#: RMS radial noise of the ``noisy`` scene's glass mesh (m), about 1/13 of its edges' length.
+NOISE_M = 0.0005
 
 
 @dataclass(frozen=True)
@@ -121,6 +127,30 @@ def _turned_cameras(compiled, camera, spp, seed, rotation_vector):
     return _model(compiled, turned, spp, seed)
 
 
+def _clean_glass_mesh(compiled, camera, spp, seed, clean_mesh):
+    """The scene with its noisy glass mesh replaced by the clean one it was scanned from
+    (``clean_mesh``, a file beside the scene file with the same vertices in the same order):
+    its vertex positions and the normals Mitsuba computes for it on loading, so the photographs
+    show the object and the scene file carries the scan's noise."""
+    import drjit as dr
+    import mitsuba as mi
+
+    clean = mi.traverse(mi.load_dict({"type": "ply", "filename": str(Path(compiled.scene.source).parent / clean_mesh)}))
+    sid = next(compiled.shape_ids[o.name] for o in compiled.scene.objects if o.mesh.name == "sphere_noisy.ply")
+    keys = [f"{sid}.vertex_positions", f"{sid}.vertex_normals"]
+    saved = [type(compiled.params[k])(compiled.params[k]) for k in keys]
+    for k, name in zip(keys, ("vertex_positions", "vertex_normals")):
+        compiled.params[k] = type(clean[name])(clean[name])
+    compiled.params.update()
+    try:
+        return _model(compiled, camera, spp, seed)
+    finally:
+        for k, v in zip(keys, saved):
+            compiled.params[k] = v
+        compiled.params.update()
+        dr.eval()
+
+
 def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
     from abs.render.medium_truth import render_with_medium
 
@@ -136,6 +166,7 @@ TRUTH_RENDERERS = {
     "white_balance_shift": _white_balance_shift,  # Bradford adaptation in XYZ (colour-science)
     "turned_environment": _turned_environment,   # the map's to_world turned, not its orientation
     "turned_cameras": _turned_cameras,           # cameras rotated in the path tracer, not resampled
+    "clean_glass_mesh": _clean_glass_mesh,       # the clean mesh, not smoothed normals
 }
 
 
@@ -176,6 +207,10 @@ CASES = [
          photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
     Case("box-camera_misalignment", "box", ("camera_misalignment",),
          photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
+    # The scene file's glass mesh carries a scan's noise (0.5 mm); the photographs show the
+    # clean sphere.
+    Case("noisy-surface_detail", "noisy", ("surface_detail",),
+         photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"})),
     # The seed's trade-off: the scene file's cloth is too bright (0.7 for a true 0.55) and the
     # glass absorbs. The catalogue has no effect for a wrong reflectance, so the cloth's
     # reflectance is fitted (the ``cloth`` scene) and the case asks whether absorption is still
@@ -226,11 +261,15 @@ def build_scene(root: Path, kind: str) -> Path:
     if not (root / "env.exr").exists():
         _assets(root)
     _conftest()
-    from conftest import box_object_toml, sphere_scene_toml
+    from conftest import box_object_toml, make_noisy_sphere, sphere_scene_toml
 
     fit = {"box": ["environment.scale", "paint.reflectance"], "sphere": ["environment.scale"],
-           "cloth": ["environment.scale", "cloth.reflectance"]}[kind]
+           "cloth": ["environment.scale", "cloth.reflectance"], "noisy": ["environment.scale"]}[kind]
     text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (box_object_toml() if kind == "box" else "")
+    if kind == "noisy":
+        if not (root / "sphere_noisy.ply").exists():
+            make_noisy_sphere(root / "sphere_noisy.ply", NOISE_M, seed=0)
+        text = text.replace('mesh = "sphere.ply"', 'mesh = "sphere_noisy.ply"')
     path = root / f"{kind}.toml"
     path.write_text(text)
     return path
