@@ -2,6 +2,7 @@
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
 ``environment.rotation``, ``environment.orientation``, ``environment.inverse_distance``,
+``environment.probe_fresnel``,
 ``sensor.<field>``, ``<object>.pose``.
 Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
 bounds to unconstrained variables.
@@ -139,6 +140,12 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             "environment.orientation", 3, "rad, rad, rad", -INF, INF,
             np.asarray(env.orientation, np.float64), null=np.zeros(3),
             setter=AttributeSetter("environment", "orientation")),
+        # The chrome ball's Fresnel left in a probe map, per channel; zeros: the map as given.
+        # Channel c of the light, hence of the image, depends on c_c alone.
+        "environment.probe_fresnel": Parameter(
+            "environment.probe_fresnel", 3, "1", -0.9, 10.0, np.asarray(env.probe_fresnel, np.float64),
+            separable_channels=True, null=np.zeros(3),
+            setter=AttributeSetter("environment", "probe_fresnel")),
     }
     for field_name, (size, unit, lower, upper, null) in type(scene.sensor).FIELDS.items():
         # A response exponent and a stray-light level per channel act on their channel alone.

@@ -77,7 +77,8 @@ class CompiledScene:
         self.shape_ids: dict[str, str] = shape_ids(scene)
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
-                                       spec.inverse_distance, spec.center, spec.orientation)
+                                       spec.inverse_distance, spec.center, spec.orientation,
+                                       spec.probe_fresnel, spec.probe_view)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
                              scene.sensor.colour_matrix, scene.sensor.intrinsics_offset)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))

@@ -32,7 +32,11 @@ class EnvironmentSpec:
     after both: a correction of the map's orientation about all three axes, a rotation vector
     (axis times angle, radians, world frame; zeros: none). With ``inverse_distance`` = 1/R > 0
     (1/m) the map lies on a sphere of radius R metres around ``center`` (world, metres), and
-    light from it shows parallax.
+    light from it shows parallax. ``probe_fresnel`` (per R, G, B, dimensionless; zeros: none) is
+    the chrome ball's angle-dependent reflectance left in a light-probe map: the light from map
+    direction ``l`` is the map's divided by ``1 + c (1 - cos_i)^5``, ``cos_i = sqrt((1 + l.v)/2)``
+    the ball's angle of incidence for ``l`` seen from ``probe_view`` ``v`` (a unit vector in the
+    map's own frame, from the ball towards the camera that photographed it).
     """
 
     file: Path
@@ -42,6 +46,8 @@ class EnvironmentSpec:
     inverse_distance: float = 0.0
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
     orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    probe_fresnel: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    probe_view: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
 
 
 @dataclass(frozen=True)

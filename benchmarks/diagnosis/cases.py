@@ -129,14 +129,15 @@ def _turned_cameras(compiled, camera, spp, seed, rotation_vector):
 
 def _clean_glass_mesh(compiled, camera, spp, seed, clean_mesh):
     """The scene with its noisy glass mesh replaced by the clean one it was scanned from
-    (``clean_mesh``, a file beside the scene file with the same vertices in the same order):
+    (``clean_mesh``, a file beside the noisy one with the same vertices in the same order):
     its vertex positions and the normals Mitsuba computes for it on loading, so the photographs
     show the object and the scene file carries the scan's noise."""
     import drjit as dr
     import mitsuba as mi
 
-    clean = mi.traverse(mi.load_dict({"type": "ply", "filename": str(Path(compiled.scene.source).parent / clean_mesh)}))
-    sid = next(compiled.shape_ids[o.name] for o in compiled.scene.objects if o.mesh.name == "sphere_noisy.ply")
+    noisy = next(o for o in compiled.scene.objects if o.mesh.name == "sphere_noisy.ply")
+    clean = mi.traverse(mi.load_dict({"type": "ply", "filename": str(noisy.mesh.parent / clean_mesh)}))
+    sid = compiled.shape_ids[noisy.name]
     keys = [f"{sid}.vertex_positions", f"{sid}.vertex_normals"]
     saved = [type(compiled.params[k])(compiled.params[k]) for k in keys]
     for k, name in zip(keys, ("vertex_positions", "vertex_normals")):
@@ -149,6 +150,33 @@ def _clean_glass_mesh(compiled, camera, spp, seed, clean_mesh):
             compiled.params[k] = v
         compiled.params.update()
         dr.eval()
+
+
+def _chrome_probe_map(compiled, camera, spp, seed, eta, k):
+    """The scene under the world its light-probe map came from: the scene file's map still
+    carries the chrome ball's reflectance (exact conductor Fresnel of complex IOR ``eta + i k``
+    per R, G, B, ``abs.probe.fresnel``, relative to normal incidence), seen from the scene file's
+    ``probe_view``, so the photographs' light is the map divided by it. abs's model of it is
+    Schlick's shape, not the exact Fresnel equations."""
+    import numpy as np
+
+    from abs.probe.fresnel import conductor_reflectance
+    from abs.probe.unwrap import latlong_directions
+    from abs.render.environment import Environment
+
+    env = compiled.environment
+    data = np.asarray(env.data.numpy(), np.float64)
+    h, w = data.shape[:2]
+    view = np.asarray(compiled.scene.environment.probe_view, np.float64)
+    cos_i = np.sqrt(np.clip(0.5 * (1.0 + latlong_directions(w, h) @ view), 0.0, 1.0))
+    excess = conductor_reflectance(cos_i, eta, k) / conductor_reflectance(np.ones(1), eta, k)[0]
+    spec = compiled.scene.environment
+    compiled.environment = Environment((data / excess).astype(np.float32), spec.scale, spec.to_world,
+                                       spec.rotation, spec.inverse_distance, spec.center, spec.orientation)
+    try:
+        return _model(compiled, camera, spp, seed)
+    finally:
+        compiled.environment = env
 
 
 def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
@@ -167,6 +195,7 @@ TRUTH_RENDERERS = {
     "turned_environment": _turned_environment,   # the map's to_world turned, not its orientation
     "turned_cameras": _turned_cameras,           # cameras rotated in the path tracer, not resampled
     "clean_glass_mesh": _clean_glass_mesh,       # the clean mesh, not smoothed normals
+    "chrome_probe_map": _chrome_probe_map,       # exact conductor Fresnel, not Schlick's shape
 }
 
 
@@ -211,6 +240,10 @@ CASES = [
     # clean sphere.
     Case("noisy-surface_detail", "noisy", ("surface_detail",),
          photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"})),
+    # The map was unwrapped from a chromium ball photographed from +z (the cameras' side) without
+    # dividing by its Fresnel reflectance (optical constants of tests/test_probe.py).
+    Case("sphere-probe_fresnel", "sphere", ("probe_fresnel",),
+         photographs=("chrome_probe_map", {"eta": [3.28, 3.05, 2.37], "k": [3.31, 3.31, 3.14]})),
     # The seed's trade-off: the scene file's cloth is too bright (0.7 for a true 0.55) and the
     # glass absorbs. The catalogue has no effect for a wrong reflectance, so the cloth's
     # reflectance is fitted (the ``cloth`` scene) and the case asks whether absorption is still
