@@ -237,9 +237,11 @@ CASES = [
     Case("box-camera_misalignment", "box", ("camera_misalignment",),
          photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
     # The scene file's glass mesh carries a scan's noise (0.5 mm); the photographs show the
-    # clean sphere.
+    # clean sphere. At the suite's 48x36 the sphere spans about 12 pixels and the score test's
+    # predicted BIC gain was -3.1 (first of all candidates, but not fitted), so the photographs
+    # resolve it at twice the size, as for subsurface.
     Case("noisy-surface_detail", "noisy", ("surface_detail",),
-         photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"})),
+         photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"}), upscale=2),
     # The map was unwrapped from a chromium ball photographed from +z (the cameras' side) without
     # dividing by its Fresnel reflectance (optical constants of tests/test_probe.py).
     Case("sphere-probe_fresnel", "sphere", ("probe_fresnel",),
