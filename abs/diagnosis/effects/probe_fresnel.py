@@ -15,23 +15,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import EnvironmentField
 
 _PARAMETER = "environment.probe_fresnel"
 
 
 @register
-class ProbeFresnel(Effect):
+class ProbeFresnel(EnvironmentField):
     name = "probe_fresnel"
-
-    def targets(self, scene, compiled) -> list[str]:
-        return ["environment"] if missing(scene, compiled.specs, _PARAMETER) else []
-
-    def add(self, data: dict, target: str) -> None:
-        data["environment"]["probe_fresnel"] = [0.0, 0.0, 0.0]
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (_PARAMETER,)
+    field = "probe_fresnel"
+    null = [0.0, 0.0, 0.0]
 
     def explain(self, target: str, values: dict) -> str:
         c = np.asarray(values[_PARAMETER], float).ravel()

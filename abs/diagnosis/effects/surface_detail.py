@@ -19,22 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import GlassField
 
 
 @register
-class SurfaceDetail(Effect):
+class SurfaceDetail(GlassField):
     name = "surface_detail"
-
-    def targets(self, scene, compiled) -> list[str]:
-        return [name for name, m in scene.materials.items()
-                if m.transmissive and missing(scene, compiled.specs, f"{name}.normal_smoothing")]
-
-    def add(self, data: dict, target: str) -> None:
-        data["materials"][target]["normal_smoothing"] = 0.0
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (f"{target}.normal_smoothing",)
+    field = "normal_smoothing"
+    null = 0.0
 
     def explain(self, target: str, values: dict) -> str:
         s = float(np.asarray(values[f"{target}.normal_smoothing"], float).ravel()[0])
