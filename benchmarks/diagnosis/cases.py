@@ -230,8 +230,8 @@ CASES = [
     # The map tilted by 8 degrees about x and 5 about z: highlights and refractions misplaced.
     Case("sphere-environment_rotation", "sphere", ("environment_rotation",),
          photographs=("turned_environment", {"rotation_vector": [0.14, 0.0, 0.09]})),
-    # Every camera turned by 0.46 degrees about its x axis and 0.63 about its y axis: the image
-    # shifted by about 0.7 and 1 pixel at the suite's 48x36 (fx 90 px), edges misplaced.
+    # Every camera turned by 0.46 degrees about its x axis and 0.63 about its y axis: to first
+    # order a principal-point error of (-0.74, -0.54) px at the suite's 48x36 (fx = 67.2 px).
     Case("sphere-camera_misalignment", "sphere", ("camera_misalignment",),
          photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
     Case("box-camera_misalignment", "box", ("camera_misalignment",),
