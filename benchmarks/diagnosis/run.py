@@ -86,7 +86,9 @@ def run_case(case, root: Path, args) -> dict:
             # than their standard error when it was added; abs.diagnosis.compensation).
             "compensating": {f["effect"]: [c["parameter"] for c in f["compensation"] if c["compensating"]]
                              for f in out["findings"]},
-            "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
+            "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1),
+            # Where the baseline's residual sits, as the report labels it (the three largest).
+            "regions": [[r["where"], r["share_of_residual"]] for r in out["regions"][:3]]}
 
 
 def _fmt(v) -> str:
