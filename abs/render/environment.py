@@ -106,7 +106,8 @@ class Environment:
         self.orientation = opaque(mi.Float, np.asarray(orientation, np.float32).ravel())
         self.probe_fresnel = opaque(mi.Float, np.asarray(probe_fresnel, np.float32).ravel())
         view = np.asarray(probe_view, np.float64).ravel()
-        self.probe_view = mi.Vector3f(*(view / np.linalg.norm(view)).astype(np.float32).tolist())
+        # Opaque, like every value here, so that scenes with other views reuse the kernels.
+        self.probe_view = mi.Vector3f(*(dr.opaque(mi.Float, float(x)) for x in view / np.linalg.norm(view)))
         self.center = mi.Point3f(*[float(c) for c in center])
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m

@@ -153,29 +153,34 @@ class Sensor:
         each pixel interpolated at ``u + d(u)`` (module docstring) by Catmull-Rom cubics,
         indices clamped to the frame."""
         h, w, b = camera.height, camera.width, camera.block
+        # The camera's numbers enter as opaque values, not literals: another view, size or
+        # block then reuses the compiled kernels (tests/test_jit.py).
+        width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
         lane = dr.arange(mi.UInt32, h * w * 3)
-        pixel = lane // 3
-        channel = lane - 3 * pixel
-        u = mi.Float(pixel % w)
-        v = mi.Float(pixel // w)
-        dcx = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(0)) / b
-        dcy = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(1)) / b
+        pixel = mi.Int32(lane // 3)
+        channel = mi.Int32(lane) - 3 * pixel
+        u = mi.Float(pixel % width)
+        v = mi.Float(pixel // width)
+        per_block = dr.opaque(mi.Float, 1.0 / b)
+        dcx = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(0)) * per_block
+        dcy = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(1)) * per_block
         # The focal error as a ratio: the same on the fine and the block pixels.
-        e = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(2)) / float(camera.K[0, 0] * b)
+        e = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(2)) / dr.opaque(mi.Float, camera.K[0, 0] * b)
+        cx, cy = dr.opaque(mi.Float, camera.K[0, 2]), dr.opaque(mi.Float, camera.K[1, 2])
         # Written as a displacement added to the pixel's own coordinate, so that at the null
         # value the sample is the pixel centre exactly (u + -0 = u; ``cx + (u - cx)`` need not be).
-        x = dr.clip(u - (dcx + e * (u - float(camera.K[0, 2]))) / (1.0 + e), 0.0, float(w - 1))
-        y = dr.clip(v - (dcy + e * (v - float(camera.K[1, 2]))) / (1.0 + e), 0.0, float(h - 1))
+        x = dr.clip(u - (dcx + e * (u - cx)) / (1.0 + e), 0.0, mi.Float(width - 1))
+        y = dr.clip(v - (dcy + e * (v - cy)) / (1.0 + e), 0.0, mi.Float(height - 1))
         x0, y0 = dr.floor(x), dr.floor(y)
         wx, wy = _catmull_rom(x - x0), _catmull_rom(y - y0)
         i0, j0 = mi.Int32(x0), mi.Int32(y0)
         out = None
         for n in range(4):
-            j = mi.UInt32(dr.clip(j0 + (n - 1), 0, h - 1))
+            j = dr.clip(j0 + (n - 1), 0, height - 1)
             row = None
             for m in range(4):
-                i = mi.UInt32(dr.clip(i0 + (m - 1), 0, w - 1))
-                term = wx[m] * dr.gather(mi.Float, flat, 3 * (j * w + i) + channel)
+                i = dr.clip(i0 + (m - 1), 0, width - 1)
+                term = wx[m] * dr.gather(mi.Float, flat, mi.UInt32(3 * (j * width + i) + channel))
                 row = term if row is None else row + term
             out = wy[n] * row if out is None else out + wy[n] * row
         return out

@@ -262,7 +262,8 @@ CASES = [
 QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
          "box-pose", "box-camera_response", "sphere-colour_transform",
-         "sphere-environment_rotation", "sphere-camera_misalignment", "sphere-null", "box-null",
+         "sphere-environment_rotation", "sphere-camera_misalignment", "sphere-probe_fresnel",
+         "noisy-surface_detail", "sphere-null", "box-null",
          "sphere-absorption+vignetting"]
 
 
