@@ -12,9 +12,10 @@ The label also says what kind of image feature the residual sits on, since sever
 effects have a signature there:
 
 - ``edges of <object> (as if moved by dx/dy px)``: at least half the region's squared residual
-  is what moving the fitted rendering by one sub-pixel displacement leaves (least squares of the
-  residual on the rendering's x and y derivatives, all channels): the error lines along the
-  checkerboard's and the outlines' edges that a misaligned camera makes.
+  is what moving the fitted rendering by one displacement leaves (least squares of the residual
+  on the rendering's x and y derivatives, all channels, unblurred and blurred by 1 and 2 pixels
+  so that shifts of a few pixels stay linear): the error lines along the checkerboard's and the
+  outlines' edges that a misaligned camera makes.
 - ``highlights``: at least half the region's squared residual lies on pixels over three times
   the view's median luminance (and in its top 10 %) in the rendering or the photograph, where a
   misoriented environment map moves bright reflections and refractions.
@@ -164,33 +165,51 @@ def _luminance(rgb: np.ndarray) -> np.ndarray:
     return rgb @ np.array([0.2126, 0.7152, 0.0722])  # Rec. 709, the rendering's primaries
 
 
-def _gradients(m: ResidualMap) -> tuple[np.ndarray, np.ndarray] | None:
-    """The fitted rendering's derivatives along x and y per channel (central differences, per
-    pixel); ``None`` without a rendering."""
+#: Scales (Gaussian sigma, pixels) at which a residual is compared with a moved rendering: a
+#: displacement is linear in the rendering's derivative only over about the width of its edges,
+#: so a shift of a few pixels (a misalignment at a higher resolution) is seen on blurred images.
+SHIFT_SCALES_PX = (0.0, 1.0, 2.0)
+
+
+def _gradients(m: ResidualMap) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+    """Per scale of :data:`SHIFT_SCALES_PX`: the blurred rendering's derivatives along x and y per
+    channel (central differences, per pixel) and the residual blurred alike; ``None`` without a
+    rendering."""
     if m.rendering is None:
         return None
-    gy, gx = np.gradient(np.asarray(m.rendering, np.float64), axis=(0, 1))
-    return gx, gy
+    out = []
+    for sigma in SHIFT_SCALES_PX:
+        rendering = np.asarray(m.rendering, np.float64)
+        residual = np.asarray(m.residual, np.float64) * m.mask[..., None]
+        if sigma > 0:
+            rendering = cv2.GaussianBlur(rendering, (0, 0), sigma)
+            residual = cv2.GaussianBlur(residual, (0, 0), sigma)
+        gy, gx = np.gradient(rendering, axis=(0, 1))
+        out.append((gx, gy, residual))
+    return out
 
 
 def shift_fit(m: ResidualMap, pixels: np.ndarray, gradients=None) -> tuple[float, np.ndarray]:
     """How well the residual in ``pixels`` is the rendering moved by one displacement: least
-    squares of ``residual ~ gx dx + gy dy`` (all channels, one ``(dx, dy)``). Returns the share
-    of the pixels' squared residual it explains (R^2) and ``(dx, dy)`` in pixels: to first order
-    the photograph shows the rendering's content moved by ``(dx, dy)`` (``P(u) = R(u - d)``, so
-    ``R - P ~ grad R . d``)."""
+    squares of ``residual ~ gx dx + gy dy`` (all channels, one ``(dx, dy)``), at each scale of
+    :data:`SHIFT_SCALES_PX` (rendering and residual blurred alike). Returns the best share of
+    the pixels' squared (blurred) residual it explains (R^2) and its ``(dx, dy)`` in pixels: to
+    first order the photograph shows the rendering's content moved by ``(dx, dy)``
+    (``P(u) = R(u - d)``, so ``R - P ~ grad R . d``)."""
     gradients = _gradients(m) if gradients is None else gradients
-    if gradients is None:
-        return 0.0, np.zeros(2)
-    gx, gy = gradients
-    A = np.stack([gx[pixels].ravel(), gy[pixels].ravel()], axis=1)
-    r = m.residual[pixels].astype(np.float64).ravel()
-    total = float(r @ r)
-    if total <= 0.0 or not np.any(A):
-        return 0.0, np.zeros(2)
-    d, *_ = np.linalg.lstsq(A, r, rcond=None)
-    rest = r - A @ d
-    return 1.0 - float(rest @ rest) / total, d
+    best = (0.0, np.zeros(2))
+    for gx, gy, residual in gradients or []:
+        A = np.stack([gx[pixels].ravel(), gy[pixels].ravel()], axis=1)
+        r = residual[pixels].ravel()
+        total = float(r @ r)
+        if total <= 0.0 or not np.any(A):
+            continue
+        d, *_ = np.linalg.lstsq(A, r, rcond=None)
+        rest = r - A @ d
+        explained = 1.0 - float(rest @ rest) / total
+        if explained > best[0]:
+            best = (explained, d)
+    return best
 
 
 def highlight_pixels(m: ResidualMap) -> np.ndarray | None:
