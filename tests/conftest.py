@@ -87,6 +87,18 @@ def make_sphere_and_floor(root: Path) -> None:
     write_mesh(root / "floor.ply", floor)
 
 
+def make_noisy_sphere(path: Path, noise_m: float, seed: int = 0) -> None:
+    """``make_sphere_and_floor``'s sphere (same vertices and faces, in the same order) with every
+    vertex moved along its radius by Gaussian noise of ``noise_m`` metres: a scan's noise."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    radial = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
+    sphere.vertices = sphere.vertices + radial * np.random.default_rng(seed).normal(0.0, noise_m, (len(radial), 1))
+    sphere.apply_translation([0, 0.05, 0])
+    write_mesh(path, sphere)
+
+
 def make_backdrop(root: Path) -> None:
     """``backdrop.obj``: a 60 x 30 cm board with texture coordinates, 12 cm behind the origin."""
     import trimesh

@@ -53,9 +53,9 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     reference = compiled.render(camera, spp=2, seed=5).numpy()
     pool = [c for e in effects().values() for c in e.candidates(scene, compiled)]
     assert {"vignetting", "camera_response", "stray_light", "env_distance",
-            "subsurface"} <= {c.effect for c in pool}
+            "subsurface", "camera_misalignment", "probe_fresnel"} <= {c.effect for c in pool}
     if "glass" in scene.materials:
-        assert {"absorption", "surface_roughness"} <= {c.effect for c in pool}
+        assert {"absorption", "surface_roughness", "surface_detail"} <= {c.effect for c in pool}
     else:
         assert "pose" in {c.effect for c in pool}
     extended = extend_scene(scene, tuple(pool), {}, tmp_path / "extended.toml")

@@ -7,6 +7,23 @@ bounding box, its share of the squared residual summed over all views, and *wher
 objects and materials seen in it (primary rays through the pixel centres intersected with the
 Mitsuba scene; ``environment`` where they escape) and its position in the image (centre, middle,
 corners), since some missing effects are tied to materials and others to the sensor.
+
+The label also says what kind of image feature the residual sits on, since several missing
+effects have a signature there:
+
+- ``edges of <object> (as if moved by dx/dy px)``: at least half the region's squared residual
+  is what moving the fitted rendering by one displacement leaves (least squares of the residual
+  on the rendering's x and y derivatives, all channels, unblurred and blurred by 1 and 2 pixels
+  so that shifts of a few pixels stay linear): the error lines along the checkerboard's and the
+  outlines' edges that a misaligned camera makes.
+- ``highlights``: at least half the region's squared residual lies on pixels over three times
+  the view's median luminance (and in its top 10 %) in the rendering or the photograph, where a
+  misoriented environment map moves bright reflections and refractions.
+- ``seen through <object>``: pixels whose primary ray hits a transmissive material, so what they
+  show is refracted (wrong glass geometry, absorption, roughness).
+- ``whole image: colour shift``: not a region of the median threshold (a shift over the whole
+  image raises the median with it) but one per view when the mean residual explains most of the
+  view's squared residual and differs between channels, as a colour-calibration error makes.
 """
 
 from __future__ import annotations
@@ -20,12 +37,16 @@ import numpy as np
 
 from abs.render.camera import Camera
 
-__all__ = ["Region", "ResidualMap", "pixel_objects", "residual_maps", "find_regions", "breakdown"]
+__all__ = ["Region", "ResidualMap", "pixel_objects", "residual_maps", "find_regions", "breakdown",
+           "describe", "shift_fit", "highlight_pixels"]
 
 ENVIRONMENT = "environment"
 MAX_REGIONS = 6
 MIN_SHARE = 0.02       # smaller regions are not worth naming
 LABEL_FRACTION = 0.2   # an object is named if it covers this fraction of a region
+EDGE_SHARE = 0.5       # a moved image explains this share of a region's squared residual: edges
+HIGHLIGHT_SHARE = 0.5  # this share of a region's squared residual lies on highlights
+OFFSET_SHARE = 0.5     # the mean residual explains this share of a view's: a whole-image shift
 
 
 @dataclass(frozen=True)
@@ -43,6 +64,10 @@ class ResidualMap:
         Index into ``names`` of the object seen through each pixel centre; -1: the environment.
     names : tuple of str
         ``object (material)`` labels.
+    rendering : ndarray, shape (H, W, 3), optional
+        The fitted rendering (linear RGB), for the edge and highlight labels.
+    transmissive : tuple of bool, optional
+        Per entry of ``names``: whether its material transmits light (glass).
     """
 
     view: str
@@ -51,6 +76,8 @@ class ResidualMap:
     mask: np.ndarray
     objects: np.ndarray
     names: tuple[str, ...]
+    rendering: np.ndarray | None = None
+    transmissive: tuple[bool, ...] = ()
 
     @property
     def squared(self) -> np.ndarray:
@@ -91,15 +118,16 @@ class Region:
                 "mean_residual": [round(x, 5) for x in self.mean_residual]}
 
 
-def pixel_objects(compiled, camera: Camera) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Which object each pixel centre sees: an index map (-1: environment) and the labels."""
+def pixel_objects(compiled, camera: Camera) -> tuple[np.ndarray, tuple[str, ...], tuple[bool, ...]]:
+    """Which object each pixel centre sees: an index map (-1: environment), the labels and
+    whether each label's material is transmissive."""
     w, h = camera.width, camera.height
     idx = dr.arange(mi.UInt32, w * h)
     origin, direction = camera.rays(mi.Float(idx % w), mi.Float(idx // w))
     si = compiled.mitsuba_scene.ray_intersect(mi.Ray3f(origin, direction))
     valid = np.array(si.is_valid(), bool)
     labels = np.full(w * h, -1, np.int32)
-    names = []
+    names, transmissive = [], []
     # Shape ids are object names unless a material shares the name (CompiledScene.shape_ids).
     objects = {compiled.shape_ids[o.name]: o for o in compiled.scene.objects}
     for k, shape in enumerate(compiled.mitsuba_scene.shapes()):
@@ -107,15 +135,17 @@ def pixel_objects(compiled, camera: Camera) -> tuple[np.ndarray, tuple[str, ...]
         labels[hit] = k
         obj = objects.get(shape.id())
         names.append(f"{shape.id()} (?)" if obj is None else f"{obj.name} ({obj.material})")
-    return labels.reshape(h, w), tuple(names)
+        transmissive.append(obj is not None and compiled.scene.materials[obj.material].transmissive)
+    return labels.reshape(h, w), tuple(names), tuple(transmissive)
 
 
 def residual_maps(compiled, views, cameras: dict[str, Camera]) -> list[ResidualMap]:
     """Residual maps of fitted renderings (``abs.fitting.fit.ViewRenderings``)."""
     maps = []
     for v in views:
-        objects, names = pixel_objects(compiled, cameras[v.name])
-        maps.append(ResidualMap(v.name, v.holdout, v.after - v.photograph, v.mask, objects, names))
+        objects, names, transmissive = pixel_objects(compiled, cameras[v.name])
+        maps.append(ResidualMap(v.name, v.holdout, v.after - v.photograph, v.mask, objects, names,
+                                v.after, transmissive))
     return maps
 
 
@@ -131,29 +161,135 @@ def _object_fractions(m: ResidualMap, pixels: np.ndarray) -> dict[str, float]:
             for i, c in sorted(zip(ids, counts), key=lambda t: -t[1])}
 
 
+def _luminance(rgb: np.ndarray) -> np.ndarray:
+    return rgb @ np.array([0.2126, 0.7152, 0.0722])  # Rec. 709, the rendering's primaries
+
+
+#: Scales (Gaussian sigma, pixels) at which a residual is compared with a moved rendering: a
+#: displacement is linear in the rendering's derivative only over about the width of its edges,
+#: so a shift of a few pixels (a misalignment at a higher resolution) is seen on blurred images.
+SHIFT_SCALES_PX = (0.0, 1.0, 2.0)
+
+
+def _gradients(m: ResidualMap) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+    """Per scale of :data:`SHIFT_SCALES_PX`: the blurred rendering's derivatives along x and y per
+    channel (central differences, per pixel) and the residual blurred alike; ``None`` without a
+    rendering."""
+    if m.rendering is None:
+        return None
+    out = []
+    for sigma in SHIFT_SCALES_PX:
+        rendering = np.asarray(m.rendering, np.float64)
+        residual = np.asarray(m.residual, np.float64) * m.mask[..., None]
+        if sigma > 0:
+            rendering = cv2.GaussianBlur(rendering, (0, 0), sigma)
+            residual = cv2.GaussianBlur(residual, (0, 0), sigma)
+        gy, gx = np.gradient(rendering, axis=(0, 1))
+        out.append((gx, gy, residual))
+    return out
+
+
+def shift_fit(m: ResidualMap, pixels: np.ndarray, gradients=None) -> tuple[float, np.ndarray]:
+    """How well the residual in ``pixels`` is the rendering moved by one displacement: least
+    squares of ``residual ~ gx dx + gy dy`` (all channels, one ``(dx, dy)``), at each scale of
+    :data:`SHIFT_SCALES_PX` (rendering and residual blurred alike). Returns the best share of
+    the pixels' squared (blurred) residual it explains (R^2) and its ``(dx, dy)`` in pixels: to
+    first order the photograph shows the rendering's content moved by ``(dx, dy)``
+    (``P(u) = R(u - d)``, so ``R - P ~ grad R . d``)."""
+    gradients = _gradients(m) if gradients is None else gradients
+    best = (0.0, np.zeros(2))
+    for gx, gy, residual in gradients or []:
+        A = np.stack([gx[pixels].ravel(), gy[pixels].ravel()], axis=1)
+        r = residual[pixels].ravel()
+        total = float(r @ r)
+        if total <= 0.0 or not np.any(A):
+            continue
+        d, *_ = np.linalg.lstsq(A, r, rcond=None)
+        rest = r - A @ d
+        explained = 1.0 - float(rest @ rest) / total
+        if explained > best[0]:
+            best = (explained, d)
+    return best
+
+
+def highlight_pixels(m: ResidualMap) -> np.ndarray | None:
+    """Pixels over three times the view's median luminance and in its top 10 %, in the fitted
+    rendering or in the photograph (a misplaced highlight errs where either has it); ``None``
+    without a rendering."""
+    if m.rendering is None or not m.mask.any():
+        return None
+    out = np.zeros(m.mask.shape, bool)
+    for image in (m.rendering, m.rendering - m.residual):
+        lum = _luminance(np.asarray(image, np.float64))
+        inside = lum[m.mask]
+        out |= (lum > max(3.0 * float(np.median(inside)), float(np.quantile(inside, 0.9)))) & m.mask
+    return out
+
+
+def describe(m: ResidualMap, pixels: np.ndarray, gradients=None, highlights=None) -> str:
+    """The ``where`` label of the pixels ``pixels`` of view ``m``: objects (transmissive ones as
+    ``seen through``), the feature the residual concentrates on (edges, highlights; module
+    docstring), and the position."""
+    fractions = _object_fractions(m, pixels)
+    see_through = {name for name, t in zip(m.names, m.transmissive) if t}
+    named = [k for k, f in fractions.items() if f >= LABEL_FRACTION] or list(fractions)[:1]
+    parts = [f"seen through {k}" if k in see_through else k for k in named]
+    explained, d = shift_fit(m, pixels, gradients)
+    if explained >= EDGE_SHARE:
+        parts = [f"edges of {named[0]} (as if moved by {d[0]:+.2g}/{d[1]:+.2g} px)"] + parts[1:]
+    highlights = highlight_pixels(m) if highlights is None else highlights
+    if highlights is not None:
+        e2 = m.squared * pixels
+        if float(e2[highlights].sum()) >= HIGHLIGHT_SHARE * (float(e2.sum()) or 1.0):
+            parts.append("highlights")
+    h, w = pixels.shape
+    y, x = np.nonzero(pixels)
+    return " / ".join(parts) + "; " + _position(float(x.mean()), float(y.mean()), w, h)
+
+
+def _colour_shift(m: ResidualMap, total: float) -> Region | None:
+    """A whole-view region when the view's mean residual explains most of its squared residual
+    and differs between channels (module docstring); ``None`` otherwise."""
+    if not m.mask.any():
+        return None
+    r = m.residual[m.mask].astype(np.float64)
+    mean = r.mean(axis=0)
+    explained = float(np.sum(mean ** 2)) * r.shape[0]
+    if explained < OFFSET_SHARE * float(np.sum(r ** 2)) or np.ptp(mean) < 0.5 * np.max(np.abs(mean)):
+        return None
+    h, w = m.mask.shape
+    channel = "RGB"[int(np.argmax(mean))]
+    where = (f"whole image: colour shift (rendering too {'bright' if mean.max() > 0 else 'dark'} "
+             f"most in {channel}: mean residual {mean[0]:+.3g}/{mean[1]:+.3g}/{mean[2]:+.3g})")
+    return Region(m.view, (0, 0, w, h), explained / total, where, _object_fractions(m, m.mask),
+                  mean.tolist())
+
+
 def find_regions(maps: list[ResidualMap]) -> list[Region]:
-    """The largest connected regions of residual, over all views, by share (at most six)."""
+    """The largest connected regions of residual, over all views, by share (at most six), and a
+    whole-view colour-shift region for each view that has one."""
     total = sum(float(m.squared.sum()) for m in maps) or 1.0
     regions = []
     for m in maps:
+        shift = _colour_shift(m, total)
+        if shift is not None:
+            regions.append(shift)
+        gradients, highlights = _gradients(m), highlight_pixels(m)
         e2 = m.squared
         h, w = e2.shape
         size = max(3, (min(h, w) // 16) | 1)
         smooth = cv2.blur(e2.astype(np.float32), (size, size))
         level = 3.0 * float(np.median(smooth[m.mask])) if m.mask.any() else 0.0
         hot = ((smooth > level) & m.mask).astype(np.uint8)
-        n, comp, stats, centroids = cv2.connectedComponentsWithStats(hot, connectivity=8)
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(hot, connectivity=8)
         for i in range(1, n):
             pixels = comp == i
             share = float(e2[pixels].sum()) / total
             if share < MIN_SHARE:
                 continue
             x, y, bw, bh = (int(s) for s in stats[i, :4])
-            fractions = _object_fractions(m, pixels)
-            named = [k for k, f in fractions.items() if f >= LABEL_FRACTION] or list(fractions)[:1]
-            where = " / ".join(named) + "; " + _position(*centroids[i], w, h)
-            regions.append(Region(m.view, (x, y, x + bw, y + bh), share, where, fractions,
-                                  m.residual[pixels].mean(axis=0).tolist()))
+            regions.append(Region(m.view, (x, y, x + bw, y + bh), share, describe(m, pixels, gradients, highlights),
+                                  _object_fractions(m, pixels), m.residual[pixels].mean(axis=0).tolist()))
     return sorted(regions, key=lambda r: -r.share_of_residual)[:MAX_REGIONS]
 
 

@@ -2,6 +2,7 @@
 
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
 ``environment.rotation``, ``environment.orientation``, ``environment.inverse_distance``,
+``environment.probe_fresnel``,
 ``sensor.<field>``, ``<object>.pose``.
 Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
 bounds to unconstrained variables.
@@ -114,8 +115,9 @@ def _null(value, size: int) -> np.ndarray | None:
 
 #: Conditioning steps of sensor fields that the default (by unit and bound) would misjudge: a
 #: colour matrix's diagonal sits at 1, its off-diagonal at 0, yet a change of 0.05 in any entry
-#: is a 5 % change of a channel.
-_SENSOR_STEPS = {"colour_matrix": 0.05}
+#: is a 5 % change of a channel; a camera-matrix offset moves the image by about its size in
+#: pixels, and images stay near linear over a fraction of a pixel, not over the bounds' 50.
+_SENSOR_STEPS = {"colour_matrix": 0.05, "intrinsics_offset": 0.3}
 
 
 def parameter_specs(scene) -> dict[str, Parameter]:
@@ -138,6 +140,12 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             "environment.orientation", 3, "rad, rad, rad", -INF, INF,
             np.asarray(env.orientation, np.float64), null=np.zeros(3),
             setter=AttributeSetter("environment", "orientation")),
+        # The chrome ball's Fresnel left in a probe map, per channel; zeros: the map as given.
+        # Channel c of the light, hence of the image, depends on c_c alone.
+        "environment.probe_fresnel": Parameter(
+            "environment.probe_fresnel", 3, "1", -0.9, 10.0, np.asarray(env.probe_fresnel, np.float64),
+            separable_channels=True, null=np.zeros(3),
+            setter=AttributeSetter("environment", "probe_fresnel")),
     }
     for field_name, (size, unit, lower, upper, null) in type(scene.sensor).FIELDS.items():
         # A response exponent and a stray-light level per channel act on their channel alone.

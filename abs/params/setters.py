@@ -3,8 +3,9 @@
 A :class:`~abs.params.names.Parameter` carries one of these (its owner chooses which), and
 :meth:`abs.render.CompiledScene.set` calls it, so the compiled scene holds no list of owners.
 They are duck-typed against the compiled scene (its ``environment``, ``sensor``, ``params``,
-``scene``, :meth:`~abs.render.CompiledScene.write_mitsuba` and
-:meth:`~abs.render.CompiledScene.set_pose`), so this module imports nothing from the renderer and
+``scene``, :meth:`~abs.render.CompiledScene.write_mitsuba`,
+:meth:`~abs.render.CompiledScene.set_pose` and
+:meth:`~abs.render.CompiledScene.set_normal_smoothing`), so this module imports nothing from the renderer and
 the parameter catalogue stays below it in the layers. Plain classes rather than closures: they
 compare, print and pickle.
 """
@@ -14,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["Setter", "AttributeSetter", "PoseSetter", "MitsubaKeySetter", "MaterialApplySetter"]
+__all__ = ["Setter", "AttributeSetter", "PoseSetter", "NormalSmoothingSetter", "MitsubaKeySetter",
+           "MaterialApplySetter"]
 
 
 class Setter(Protocol):
@@ -44,6 +46,17 @@ class PoseSetter:
 
     def __call__(self, compiled, value) -> None:
         compiled.set_pose(self.obj, value)
+
+
+@dataclass(frozen=True)
+class NormalSmoothingSetter:
+    """The shading normals of every mesh of a material, smoothed towards (or pushed away from)
+    their neighbours' (:meth:`abs.render.CompiledScene.set_normal_smoothing`)."""
+
+    material: str
+
+    def __call__(self, compiled, value) -> None:
+        compiled.set_normal_smoothing(self.material, value)
 
 
 @dataclass(frozen=True)

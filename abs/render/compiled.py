@@ -22,10 +22,11 @@ import numpy as np
 
 from abs.errors import SceneError
 from abs.params.names import POSE_FIELD, Parameter, parameter_specs
+from abs.params.setters import NormalSmoothingSetter
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
 from abs.render.brdf_tables import bind_coefficients
 from abs.render.camera import Camera
-from abs.render.edges import MovingMesh, edge_adjacency
+from abs.render.edges import MovingMesh, edge_adjacency, neighbour_mean
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import from_numpy, opaque
@@ -96,9 +97,10 @@ class CompiledScene:
         self.shape_ids: dict[str, str] = shape_ids(scene)
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
-                                       spec.inverse_distance, spec.center, spec.orientation)
+                                       spec.inverse_distance, spec.center, spec.orientation,
+                                       spec.probe_fresnel, spec.probe_view)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
-                             scene.sensor.colour_matrix)
+                             scene.sensor.colour_matrix, scene.sensor.intrinsics_offset)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}
@@ -111,6 +113,8 @@ class CompiledScene:
             self._rest[obj.name] = (pos, normals, pos.mean(axis=0))
         self._posed: dict[str, mi.Float] = {}
         self._adjacency: dict[str, tuple] = {}
+        self._smoothing: dict[str, mi.Float] = {}     # material -> its normal_smoothing
+        self._normal_detail: dict[str, np.ndarray] = {}  # object -> neighbours' mean minus normal
         self.values: dict[str, object] = {}
         for name, p in self.specs.items():
             if p.initial is not None:
@@ -118,6 +122,11 @@ class CompiledScene:
         for obj in scene.objects:
             if np.any(obj.pose != 0):
                 self.set(f"{obj.name}.{POSE_FIELD}", from_numpy(mi.Float, obj.pose))
+        for name, spec in self.specs.items():
+            # Fields that reshape meshes rather than set a BSDF value: Mitsuba loaded the meshes
+            # as they are, so a scene file's non-null value is written into them here.
+            if isinstance(spec.setter, NormalSmoothingSetter) and not spec.at_null():
+                self.set(name, from_numpy(mi.Float, spec.initial))
         for name, material in scene.materials.items():
             for field in material.parameters():
                 # Every value goes through set() once: Mitsuba builds plugins with their values as
@@ -204,6 +213,37 @@ class CompiledScene:
         target = self.params[f"{spec.owner}.{mspec.mitsuba_key}"]
         return target.array if isinstance(target, mi.TensorXf) else target
 
+    def set_normal_smoothing(self, material: str, value: mi.Float) -> None:
+        """Smooth the shading normals of every mesh of ``material`` (``<material>.normal_smoothing``;
+        use :meth:`set`, which records the value): vertex normal ``n + s (m - n)``, ``m`` the
+        mean of its edge neighbours' normals as loaded, ``s`` the value (Mitsuba normalises the
+        interpolated normal). At ``s = 0`` the normals are the loaded ones exactly
+        (``n + 0 (m - n)``). An object's pose turns the smoothed normals."""
+        self._smoothing[material] = value
+        for obj in self.scene.objects:
+            if obj.material != material or self._rest[obj.name][1] is None:
+                continue
+            pose = self.values.get(f"{obj.name}.{POSE_FIELD}")
+            if pose is not None and (dr.grad_enabled(pose) or np.any(np.asarray(dr.detach(pose)) != 0)):
+                self.set_pose(obj.name, pose)  # writes the smoothed normals, turned
+            else:
+                self.params[f"{self.shape_ids[obj.name]}.vertex_normals"] = dr.ravel(self._normals(obj.name))
+
+    def _normals(self, obj: str) -> mi.Vector3f:
+        """Object ``obj``'s vertex normals before its pose: as loaded, smoothed by its material's
+        ``normal_smoothing`` when one was set."""
+        normals = self._rest[obj][1]
+        n = mi.Vector3f(*[from_numpy(mi.Float, normals[:, i]) for i in range(3)])
+        material = next(o.material for o in self.scene.objects if o.name == obj)
+        if material not in self._smoothing:
+            return n
+        if obj not in self._normal_detail:
+            faces = np.array(self.params[f"{self.shape_ids[obj]}.faces"], np.int64).reshape(-1, 3)
+            self._normal_detail[obj] = neighbour_mean(normals, faces) - normals
+        detail = self._normal_detail[obj]
+        s = dr.gather(mi.Float, self._smoothing[material], mi.UInt32(0))
+        return n + s * mi.Vector3f(*[from_numpy(mi.Float, detail[:, i]) for i in range(3)])
+
     def set_pose(self, obj: str, pose: mi.Float) -> None:
         """Move object ``obj``'s mesh rigidly to ``pose`` (``[tx, ty, tz, rx, ry, rz]``, metres
         and a rotation vector about the mesh's centroid; ``docs/conventions.md``) from where the
@@ -219,8 +259,7 @@ class CompiledScene:
         sid = self.shape_ids[obj]
         self.params[f"{sid}.vertex_positions"] = positions
         if normals is not None:
-            nrm = mi.Vector3f(*[from_numpy(mi.Float, normals[:, i]) for i in range(3)])
-            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ nrm)
+            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ self._normals(obj))
 
     def _spec(self, name: str) -> Parameter:
         if name not in self.specs:

@@ -29,7 +29,7 @@ import numpy as np
 from abs.camera.pinhole import project
 from abs.render.jit import from_numpy, opaque, seed32
 
-__all__ = ["MovingMesh", "edge_adjacency", "silhouette_edges", "boundary_term"]
+__all__ = ["MovingMesh", "edge_adjacency", "neighbour_mean", "silhouette_edges", "boundary_term"]
 
 # Offset of the two radiance probes from the edge, in pixels: small against a pixel, but outside
 # the sliver next to a polygonal silhouette where interpolated shading normals face away from the
@@ -72,6 +72,21 @@ def edge_adjacency(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     two = counts >= 2
     edge_faces[two, 1] = face_of[start[two] + 1]
     return unique, edge_faces
+
+
+def neighbour_mean(values: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Per vertex, the mean of ``values`` (shape ``(vertices, k)``) over the vertices it shares an
+    edge with (its own value for a vertex on no face)."""
+    edges, _ = edge_adjacency(faces)
+    values = np.asarray(values, np.float64)
+    total = np.zeros_like(values)
+    count = np.zeros(len(values))
+    for a, b in ((0, 1), (1, 0)):
+        np.add.at(total, edges[:, a], values[edges[:, b]])
+        np.add.at(count, edges[:, a], 1.0)
+    alone = count == 0
+    total[alone], count[alone] = values[alone], 1.0
+    return total / count[:, None]
 
 
 def silhouette_edges(vertices: np.ndarray, mesh: MovingMesh, eye: np.ndarray) -> np.ndarray:

@@ -26,6 +26,19 @@ which is exactly ``d`` at ``inv = 0`` and has the first-order term ``o' - b d`` 
 ``o'`` across the ray), so the derivative with respect to ``inv`` at infinity is not zero.
 Sampling stays in direction space (the pdf of ``d``), so the estimators are unchanged.
 
+Chrome Fresnel left in a light-probe map (``environment.probe_fresnel`` = ``c`` per channel):
+a chrome ball reflects more light at grazing incidence than facing the camera, so a probe map not
+divided by the ball's reflectance is too bright in the directions the ball's rim shows (behind
+the ball as seen from the probe camera). The light from map direction ``l`` is then
+
+    L(l) = L_map(l) / (1 + c (1 - cos_i)^5),     cos_i = sqrt((1 + l.v) / 2),
+
+Schlick's shape of a metal's ``F(cos_i) / F(1)`` (``c = 1/F0 - 1``, about 0.8 for chromium),
+``cos_i`` the ball's angle of incidence for ``l`` seen by a distant camera in direction ``v``
+(``probe_view``, map frame). At ``c = 0`` it divides by ``1 + 0 w = 1`` exactly, so the map is
+looked up as without it. Sampling ignores the factor (a pdf that differs from the light is
+still unbiased), and :meth:`Environment.mitsuba_dict`'s emitter leaves it out.
+
 Conventions (docs/conventions.md): Mitsuba's orientation, ``u = atan2(x, -z) / 2pi``,
 ``v = acos(y) / pi`` in the map's local frame; column centres at ``u = (i + 0.5) / W`` and row
 centres at ``v = j / (H - 1)``, as Mitsuba's ``envmap`` interpolates.
@@ -81,7 +94,8 @@ class Environment:
 
     def __init__(self, rgb: np.ndarray, scale: float = 1.0, to_world: np.ndarray | None = None,
                  rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0),
-                 orientation=(0.0, 0.0, 0.0)):
+                 orientation=(0.0, 0.0, 0.0), probe_fresnel=(0.0, 0.0, 0.0),
+                 probe_view=(0.0, 0.0, 1.0)):
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
         self.data = mi.TensorXf(from_numpy(mi.Float, rgb), rgb.shape)
@@ -90,6 +104,10 @@ class Environment:
         self.rotation = dr.opaque(mi.Float, rotation)
         self.inverse_distance = dr.opaque(mi.Float, inverse_distance)
         self.orientation = opaque(mi.Float, np.asarray(orientation, np.float32).ravel())
+        self.probe_fresnel = opaque(mi.Float, np.asarray(probe_fresnel, np.float32).ravel())
+        view = np.asarray(probe_view, np.float64).ravel()
+        # Opaque, like every value here, so that scenes with other views reuse the kernels.
+        self.probe_view = mi.Vector3f(*(dr.opaque(mi.Float, float(x)) for x in view / np.linalg.norm(view)))
         self.center = mi.Point3f(*[float(c) for c in center])
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m
@@ -116,7 +134,14 @@ class Environment:
         u = dr.atan2(v.x, -v.z) * dr.inv_two_pi
         u = u - dr.floor(u)
         t = dr.safe_acos(v.y) * dr.inv_pi
-        return self._bilinear(u, t, active) * self.scale
+        return self._bilinear(u, t, active) * self.scale / self._probe_fresnel(v)
+
+    def _probe_fresnel(self, v: mi.Vector3f) -> mi.Color3f:
+        """``1 + c (1 - cos_i)^5`` for map-frame direction ``v`` (module docstring)."""
+        cos_i = dr.safe_sqrt(0.5 * (1.0 + dr.dot(v, self.probe_view)))
+        w = dr.square(dr.square(1.0 - cos_i)) * (1.0 - cos_i)
+        c = self.probe_fresnel
+        return mi.Color3f(*(1.0 + dr.gather(mi.Float, c, mi.UInt32(i)) * w for i in range(3)))
 
     def hit_direction(self, origin: mi.Point3f, d: mi.Vector3f) -> mi.Vector3f:
         """Direction from the centre to where the ray ``origin + t d`` (``d`` unit) leaves the

@@ -1,30 +1,42 @@
-"""The camera sensor applied to rendered radiance: vignetting, stray light, a colour matrix and a
-non-linear response.
+"""The camera sensor applied to rendered radiance: an error of the camera matrix, vignetting,
+stray light, a colour matrix and a non-linear response.
 
 Applied to every rendering after the path tracer (in :meth:`CompiledScene.render`), in Dr.Jit, so
 images stay differentiable with respect to the sensor's parameters and to everything upstream.
-The order follows the light: the lens attenuates the image towards its corners (vignetting),
-light scattered inside the lens adds a veil (stray light), the sensor's colour filters mix the
-channels of what reaches it (colour matrix), then the sensor converts each channel's irradiance
-to values (response)::
+The order follows the light: the photographs' camera matrix differs from the calibrated one
+(``intrinsics_offset``: the image lands shifted and scaled on the sensor), the lens attenuates
+the image towards its corners (vignetting), light scattered inside the lens adds a veil (stray
+light), the sensor's colour filters mix the channels of what reaches it (colour matrix), then the
+sensor converts each channel's irradiance to values (response)::
 
-    out_c = (sum_j M_cj (V(r) L_j + s_j)) ** gamma_c,     V(r) = 1 + k1 r^2 + k2 r^4
+    out_c = (sum_j M_cj (V(r) L'_j + s_j)) ** gamma_c,     V(r) = 1 + k1 r^2 + k2 r^4,
+    L'(u) = L(u + d(u)),     d(u) = -(dc + e (u - c)) / (1 + e),     e = df / f
 
 with ``r`` the distance of the point on the image plane from the principal point in units of the
-focal length (OpenCV normalised coordinates) and ``M`` the 3x3 colour matrix (rendering RGB to
-photograph RGB). The colour matrix sits **before** the response: a camera mixes colours in its
+focal length (OpenCV normalised coordinates), ``M`` the 3x3 colour matrix (rendering RGB to
+photograph RGB), and ``L(u + d(u))`` the rendering resampled (Catmull-Rom cubics) where the calibrated camera
+sees what the photographs' camera, with principal point ``c + dc`` and focal lengths scaled by
+``1 + e``, sees at pixel ``u`` (``K K'^-1 u``: exact for a pinhole, skew included, since scaling
+the focal lengths scales the skew with them). A camera turned by a small angle about its centre
+moves the image like a principal-point shift of ``f`` times the angle, so that shift also stands
+for a common small rotation of the cameras; a translation (parallax) is not an image warp and is
+not modelled. The colour matrix sits **before** the response: a camera mixes colours in its
 linear signal (filter cross-talk, white balance, its colour-correction matrix), and any tone
 curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
 
-Every operation is exact at its null value (``k = 0``: ``L * 1``; ``s = 0``: ``+ 0``;
-``M = I``: ``1 x_c + 0 x_j + 0 x_k``, where the products with 0 are +-0 and adding them to
+Every operation is exact at its null value (``dc = df = 0``: the displacement is ``-0``, the
+sample sits on the pixel centre with Catmull-Rom weights 0, 1, 0, 0, ``L * 1 + L' * 0 ...``; ``k = 0``: ``L * 1``;
+``s = 0``: ``+ 0``; ``M = I``: ``1 x_c + 0 x_j + 0 x_k``, where the products with 0 are +-0 and adding them to
 ``x_c`` leaves it unchanged for any finite ``x``; ``gamma = 1``: ``x * exp(0)``), so a sensor at
 its null values returns the rendering bit for bit.
 
 Downsampled cameras (``Camera.block > 1``) compare box averages of fine photograph pixels, each
 vignetted at its own centre; the falloff is linear in ``k``, so the block average of ``r^2`` and
 ``r^4`` over the fine pixel centres gives exactly that average. The colour matrix is linear too,
-so it commutes with the block average.
+so it commutes with the block average. The resampling works on the rendered (block) pixels, with
+the offsets converted to them (``dc / block``; ``e`` is a ratio), so on a downsampled camera it
+interpolates between block averages rather than averaging resampled fine pixels. Near the image border the shifted samples are clamped to the edge pixels: what lies
+outside the rendered frame is not rendered.
 """
 
 from __future__ import annotations
@@ -40,6 +52,20 @@ __all__ = ["Sensor", "radial_moments"]
 
 # Below this value the logarithm in the response is clamped (a black pixel stays black).
 _TINY = 1e-30
+
+
+def _catmull_rom(t):
+    """Catmull-Rom weights of the samples at -1, 0, 1, 2 for a point ``t`` in [0, 1) past sample 0.
+
+    A cubic rather than bilinear interpolation so that the image is continuously differentiable
+    in the offset: at the null value every sample sits on a pixel centre, where a bilinear
+    interpolant has a kink and its derivative would be one-sided; Catmull-Rom's is the image's
+    central difference there. At ``t = 0`` the weights are exactly 0, 1, 0, 0.
+    """
+    t2 = t * t
+    t3 = t2 * t
+    return (0.5 * (2.0 * t2 - t3 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+            0.5 * (4.0 * t2 - 3.0 * t3 + t), 0.5 * (t3 - t2))
 
 
 def radial_moments(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
@@ -87,14 +113,20 @@ class Sensor:
     colour_matrix : array-like, shape (9,), optional
         The 3x3 matrix from rendering RGB to photograph RGB, row-major (dimensionless); the
         identity when left out.
+    intrinsics_offset : array-like, shape (3,), optional
+        ``[dcx, dcy, dfx]`` in pixels of the full-resolution photographs: the photographs'
+        principal point minus the calibrated one, and their focal length ``fx`` minus the
+        calibrated one (``fy`` and the skew scale by the same ratio); zeros when left out.
     """
 
-    def __init__(self, vignetting, response, stray_light, colour_matrix=None):
+    def __init__(self, vignetting, response, stray_light, colour_matrix=None, intrinsics_offset=None):
         self.vignetting = opaque(mi.Float, np.asarray(vignetting, np.float32))
         self.response = opaque(mi.Float, np.asarray(response, np.float32))
         self.stray_light = opaque(mi.Float, np.asarray(stray_light, np.float32))
         matrix = np.eye(3).ravel() if colour_matrix is None else colour_matrix
         self.colour_matrix = opaque(mi.Float, np.asarray(matrix, np.float32).ravel())
+        offset = np.zeros(3) if intrinsics_offset is None else intrinsics_offset
+        self.intrinsics_offset = opaque(mi.Float, np.asarray(offset, np.float32).ravel())
 
     def is_linear(self) -> bool:
         """Whether the output is affine in the radiance with a fixed derivative: the response is 1
@@ -109,7 +141,7 @@ class Sensor:
     def apply(self, image: mi.TensorXf, camera: Camera) -> mi.TensorXf:
         """The sensor's output for rendered radiance ``image`` (height, width, 3) of ``camera``."""
         h, w = camera.height, camera.width
-        flat = image.array
+        flat = self._resample(image.array, camera)
         r2, r4 = radial_moments(camera)
         # One entry per (pixel, channel) lane, in the image's (H, W, 3) memory order.
         r2 = from_numpy(mi.Float, np.repeat(r2.ravel(), 3))
@@ -125,6 +157,43 @@ class Sensor:
         log_x = dr.log(dr.maximum(mixed, _TINY))
         out = mixed * dr.exp((gamma - 1.0) * log_x)
         return mi.TensorXf(out, (h, w, 3))
+
+    def _resample(self, flat: mi.Float, camera: Camera) -> mi.Float:
+        """The (H, W, 3) image ``flat`` as the photographs' camera (``intrinsics_offset``) sees it:
+        each pixel interpolated at ``u + d(u)`` (module docstring) by Catmull-Rom cubics,
+        indices clamped to the frame."""
+        h, w, b = camera.height, camera.width, camera.block
+        # The camera's numbers enter as opaque values, not literals: another view, size or
+        # block then reuses the compiled kernels (tests/test_jit.py).
+        width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
+        lane = dr.arange(mi.UInt32, h * w * 3)
+        pixel = mi.Int32(lane // 3)
+        channel = mi.Int32(lane) - 3 * pixel
+        u = mi.Float(pixel % width)
+        v = mi.Float(pixel // width)
+        per_block = dr.opaque(mi.Float, 1.0 / b)
+        dcx = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(0)) * per_block
+        dcy = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(1)) * per_block
+        # The focal error as a ratio: the same on the fine and the block pixels.
+        e = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(2)) / dr.opaque(mi.Float, camera.K[0, 0] * b)
+        cx, cy = dr.opaque(mi.Float, camera.K[0, 2]), dr.opaque(mi.Float, camera.K[1, 2])
+        # Written as a displacement added to the pixel's own coordinate, so that at the null
+        # value the sample is the pixel centre exactly (u + -0 = u; ``cx + (u - cx)`` need not be).
+        x = dr.clip(u - (dcx + e * (u - cx)) / (1.0 + e), 0.0, mi.Float(width - 1))
+        y = dr.clip(v - (dcy + e * (v - cy)) / (1.0 + e), 0.0, mi.Float(height - 1))
+        x0, y0 = dr.floor(x), dr.floor(y)
+        wx, wy = _catmull_rom(x - x0), _catmull_rom(y - y0)
+        i0, j0 = mi.Int32(x0), mi.Int32(y0)
+        out = None
+        for n in range(4):
+            j = dr.clip(j0 + (n - 1), 0, height - 1)
+            row = None
+            for m in range(4):
+                i = dr.clip(i0 + (m - 1), 0, width - 1)
+                term = wx[m] * dr.gather(mi.Float, flat, mi.UInt32(3 * (j * width + i) + channel))
+                row = term if row is None else row + term
+            out = wy[n] * row if out is None else out + wy[n] * row
+        return out
 
     def _mix(self, flat: mi.Float, channel: mi.UInt32) -> mi.Float:
         """``sum_j M_cj x_j`` for every (pixel, channel ``c``) lane of the (H, W, 3) image

@@ -66,7 +66,7 @@ def load_scene(path: str | Path) -> Scene:
 
     env_fields = root.sub("environment")
     env_fields.check_known({"file", "scale", "to_world", "rotation", "inverse_distance", "center",
-                            "orientation"})
+                            "orientation", "probe_fresnel", "probe_view"})
     environment = EnvironmentSpec(
         file=env_fields.file("file", suffixes=_IMAGE_SUFFIXES),
         scale=env_fields.number("scale", 1.0, lower=0.0),
@@ -76,6 +76,9 @@ def load_scene(path: str | Path) -> Scene:
         center=env_fields.array("center", (3,), default=[0.0, 0.0, 0.0]),
         # Three numbers, never one for all: a rotation vector [a, a, a] is no natural shorthand.
         orientation=env_fields.array("orientation", (3,), default=[0.0, 0.0, 0.0]),
+        # Bounded so that 1 + c (1 - cos_i)^5 stays positive for every direction.
+        probe_fresnel=env_fields.vector("probe_fresnel", 3, default=np.zeros(3), lower=-0.9, upper=10.0),
+        probe_view=_unit(env_fields, "probe_view", [0.0, 0.0, 1.0]),
     )
     sensor = _sensor(root.sub("sensor", required=False) or Fields({}, source, "sensor"))
 
@@ -144,6 +147,15 @@ def _pose_field(fields: Fields, name: str) -> SceneError:
     return fields.error(POSE_FIELD, f"a material may not have a field named {POSE_FIELD!r}: "
                                     f"parameter '{name}.{POSE_FIELD}' would name the pose of an object "
                                     f"called {name!r} (objects and materials may share names)")
+
+
+def _unit(fields: Fields, key: str, default) -> np.ndarray:
+    """A direction: three numbers, not all zero, returned normalised."""
+    value = fields.array(key, (3,), default=default)
+    norm = float(np.linalg.norm(value))
+    if not norm > 0.0:
+        raise fields.error(key, f"expected a direction (three numbers, not all zero), got {value.tolist()}")
+    return value / norm
 
 
 def _sensor(fields: Fields) -> SensorSpec:

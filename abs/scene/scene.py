@@ -32,7 +32,11 @@ class EnvironmentSpec:
     after both: a correction of the map's orientation about all three axes, a rotation vector
     (axis times angle, radians, world frame; zeros: none). With ``inverse_distance`` = 1/R > 0
     (1/m) the map lies on a sphere of radius R metres around ``center`` (world, metres), and
-    light from it shows parallax.
+    light from it shows parallax. ``probe_fresnel`` (per R, G, B, dimensionless; zeros: none) is
+    the chrome ball's angle-dependent reflectance left in a light-probe map: the light from map
+    direction ``l`` is the map's divided by ``1 + c (1 - cos_i)^5``, ``cos_i = sqrt((1 + l.v)/2)``
+    the ball's angle of incidence for ``l`` seen from ``probe_view`` ``v`` (a unit vector in the
+    map's own frame, from the ball towards the camera that photographed it).
     """
 
     file: Path
@@ -42,6 +46,8 @@ class EnvironmentSpec:
     inverse_distance: float = 0.0
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
     orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    probe_fresnel: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    probe_view: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,12 @@ class SensorSpec:
         The 3x3 matrix ``M``, row-major, that takes the rendering's linear RGB to the
         photographs' (``out_i = sum_j M_ij in_j``, dimensionless); the identity is no colour
         transform. Applied after vignetting and stray light, before the response.
+    intrinsics_offset : ndarray, shape (3,)
+        ``[dcx, dcy, dfx]``, pixels of the full-resolution photographs: the photographs' camera
+        matrix minus the calibrated one (``cameras.json``): principal point moved by
+        ``(dcx, dcy)``, focal length ``fx`` by ``dfx`` with ``fy`` and the skew scaled alike;
+        zeros: the calibration is right. Rendered as a resampling of the image (exact for a
+        pinhole; ``abs.render.sensor``), applied first.
     """
 
     # field: (size, unit, lower, upper, null value: one number for every entry, or ``size``
@@ -74,12 +86,16 @@ class SensorSpec:
         # A real camera's colour matrix can have negative entries (cross-talk correction), so
         # no entry is bounded.
         "colour_matrix": (9, "1", -float("inf"), float("inf"), tuple(np.eye(3).ravel())),
+        # Bounded to offsets a calibration could plausibly miss by; beyond them the resampling's
+        # clamped border would dominate.
+        "intrinsics_offset": (3, "px", -50.0, 50.0, 0.0),
     }
 
     vignetting: np.ndarray = field(default_factory=lambda: np.zeros(2))
     response: np.ndarray = field(default_factory=lambda: np.ones(3))
     stray_light: np.ndarray = field(default_factory=lambda: np.zeros(3))
     colour_matrix: np.ndarray = field(default_factory=lambda: np.eye(3).ravel())
+    intrinsics_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @staticmethod
     def null(name: str) -> np.ndarray:

@@ -133,6 +133,9 @@ def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     environment["center"] = np.asarray(env.center, np.float64).tolist()
     environment["orientation"] = values.get("environment.orientation",
                                             np.asarray(env.orientation, np.float64).tolist())
+    environment["probe_fresnel"] = values.get("environment.probe_fresnel",
+                                              np.asarray(env.probe_fresnel, np.float64).tolist())
+    environment["probe_view"] = np.asarray(env.probe_view, np.float64).tolist()
     sensor = {key: values.get(f"sensor.{key}", np.asarray(getattr(scene.sensor, key), np.float64).tolist())
               for key in type(scene.sensor).FIELDS}
     # Three rows of three read as the matrix they are (the loader takes either form).

@@ -9,6 +9,9 @@ Two scenes, built on the fly:
   reflects a different fraction of light than its nominal reflectance, which a user would fit);
 - ``box``: a painted box and a clear glass sphere on the cloth in front of the checkerboard;
   fitted: ``environment.scale`` and the paint's reflectance.
+- ``noisy``: the sphere scene whose glass mesh is a scan of the sphere with noise
+  (``sphere_noisy.ply``: the same vertices moved along their radii by 0.5 mm, RMS); fitted:
+  ``environment.scale``.
 """
 
 from __future__ import annotations
@@ -18,6 +21,9 @@ from pathlib import Path
 
 
 __all__ = ["Case", "CASES", "QUICK", "build_scene"]
+
+#: RMS radial noise of the ``noisy`` scene's glass mesh (m), about 1/13 of its edges' length.
+NOISE_M = 0.0005
 
 
 @dataclass(frozen=True)
@@ -105,6 +111,74 @@ def _turned_environment(compiled, camera, spp, seed, rotation_vector):
         compiled.environment = env
 
 
+def _turned_cameras(compiled, camera, spp, seed, rotation_vector):
+    """The scene through the camera turned about its own centre by ``rotation_vector`` (radians,
+    camera frame: x right, y down, z forward; scipy's rotation), rendered by the path tracer:
+    the photographs' camera is not the calibrated one that ``cameras.json`` states, as when a
+    mount or a calibration is off by a fraction of a degree. abs's model of it is a resampling
+    by a principal-point shift (``[sensor] intrinsics_offset``), exact only to first order."""
+    from scipy.spatial.transform import Rotation
+
+    from abs.render import Camera
+
+    turn = Rotation.from_rotvec(rotation_vector).as_matrix()
+    # x_cam' = Q x_cam = Q R X + Q t: the same centre, turned.
+    turned = Camera(camera.K, turn @ camera.R, turn @ camera.t, camera.width, camera.height, camera.block)
+    return _model(compiled, turned, spp, seed)
+
+
+def _clean_glass_mesh(compiled, camera, spp, seed, clean_mesh):
+    """The scene with its noisy glass mesh replaced by the clean one it was scanned from
+    (``clean_mesh``, a file beside the noisy one with the same vertices in the same order):
+    its vertex positions and the normals Mitsuba computes for it on loading, so the photographs
+    show the object and the scene file carries the scan's noise."""
+    import drjit as dr
+    import mitsuba as mi
+
+    noisy = next(o for o in compiled.scene.objects if o.mesh.name == "sphere_noisy.ply")
+    clean = mi.traverse(mi.load_dict({"type": "ply", "filename": str(noisy.mesh.parent / clean_mesh)}))
+    sid = compiled.shape_ids[noisy.name]
+    keys = [f"{sid}.vertex_positions", f"{sid}.vertex_normals"]
+    saved = [type(compiled.params[k])(compiled.params[k]) for k in keys]
+    for k, name in zip(keys, ("vertex_positions", "vertex_normals")):
+        compiled.params[k] = type(clean[name])(clean[name])
+    compiled.params.update()
+    try:
+        return _model(compiled, camera, spp, seed)
+    finally:
+        for k, v in zip(keys, saved):
+            compiled.params[k] = v
+        compiled.params.update()
+        dr.eval()
+
+
+def _chrome_probe_map(compiled, camera, spp, seed, eta, k):
+    """The scene under the world its light-probe map came from: the scene file's map still
+    carries the chrome ball's reflectance (exact conductor Fresnel of complex IOR ``eta + i k``
+    per R, G, B, ``abs.probe.fresnel``, relative to normal incidence), seen from the scene file's
+    ``probe_view``, so the photographs' light is the map divided by it. abs's model of it is
+    Schlick's shape, not the exact Fresnel equations."""
+    import numpy as np
+
+    from abs.probe.fresnel import conductor_reflectance
+    from abs.probe.unwrap import latlong_directions
+    from abs.render.environment import Environment
+
+    env = compiled.environment
+    data = np.asarray(env.data.numpy(), np.float64)
+    h, w = data.shape[:2]
+    view = np.asarray(compiled.scene.environment.probe_view, np.float64)
+    cos_i = np.sqrt(np.clip(0.5 * (1.0 + latlong_directions(w, h) @ view), 0.0, 1.0))
+    excess = conductor_reflectance(cos_i, eta, k) / conductor_reflectance(np.ones(1), eta, k)[0]
+    spec = compiled.scene.environment
+    compiled.environment = Environment((data / excess).astype(np.float32), spec.scale, spec.to_world,
+                                       spec.rotation, spec.inverse_distance, spec.center, spec.orientation)
+    try:
+        return _model(compiled, camera, spp, seed)
+    finally:
+        compiled.environment = env
+
+
 def _scattering_cloth(compiled, camera, spp, seed, mean_free_path):
     from abs.render.medium_truth import render_with_medium
 
@@ -119,6 +193,9 @@ TRUTH_RENDERERS = {
     "scattering_cloth": _scattering_cloth,       # volumetric slab in volpath, not a spread exit point
     "white_balance_shift": _white_balance_shift,  # Bradford adaptation in XYZ (colour-science)
     "turned_environment": _turned_environment,   # the map's to_world turned, not its orientation
+    "turned_cameras": _turned_cameras,           # cameras rotated in the path tracer, not resampled
+    "clean_glass_mesh": _clean_glass_mesh,       # the clean mesh, not smoothed normals
+    "chrome_probe_map": _chrome_probe_map,       # exact conductor Fresnel, not Schlick's shape
 }
 
 
@@ -153,6 +230,29 @@ CASES = [
     # The map tilted by 8 degrees about x and 5 about z: highlights and refractions misplaced.
     Case("sphere-environment_rotation", "sphere", ("environment_rotation",),
          photographs=("turned_environment", {"rotation_vector": [0.14, 0.0, 0.09]})),
+    # Every camera turned by 0.46 degrees about its x axis and 0.63 about its y axis: to first
+    # order a principal-point error of (-0.74, -0.54) px at the suite's 48x36 (fx = 67.2 px).
+    Case("sphere-camera_misalignment", "sphere", ("camera_misalignment",),
+         photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
+    Case("box-camera_misalignment", "box", ("camera_misalignment",),
+         photographs=("turned_cameras", {"rotation_vector": [0.008, -0.011, 0.0]})),
+    # The scene file's glass mesh carries a scan's noise (0.5 mm); the photographs show the
+    # clean sphere. At the suite's 48x36 the sphere spans about 12 pixels and the score test's
+    # predicted BIC gain was -3.1 (first of all candidates, but not fitted), so the photographs
+    # resolve it at twice the size, as for subsurface.
+    Case("noisy-surface_detail", "noisy", ("surface_detail",),
+         photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"}), upscale=2),
+    # The map was unwrapped from a chromium ball photographed from +z (the cameras' side) without
+    # dividing by its Fresnel reflectance (optical constants of tests/test_probe.py).
+    Case("sphere-probe_fresnel", "sphere", ("probe_fresnel",),
+         photographs=("chrome_probe_map", {"eta": [3.28, 3.05, 2.37], "k": [3.31, 3.31, 3.14]})),
+    # The seed's trade-off: the scene file's cloth is too bright (0.7 for a true 0.55) and the
+    # glass absorbs. The catalogue has no effect for a wrong reflectance, so the cloth's
+    # reflectance is fitted (the ``cloth`` scene) and the case asks whether absorption is still
+    # found with it, at what amount, and which baseline parameters the report flags as
+    # compensating.
+    Case("cloth-absorption+dark_cloth", "cloth", ("absorption",),
+         {"glass.absorption": [3.0, 6.0, 10.0], "cloth.reflectance": [0.55, 0.55, 0.5]}),
     Case("box-absorption+stray_light", "box", ("absorption", "stray_light"),
          {"glass.absorption": [3.0, 6.0, 10.0]},
          ("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
@@ -162,7 +262,8 @@ CASES = [
 QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere-camera_response",
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
          "box-pose", "box-camera_response", "sphere-colour_transform",
-         "sphere-environment_rotation", "sphere-null", "box-null",
+         "sphere-environment_rotation", "sphere-camera_misalignment", "sphere-probe_fresnel",
+         "noisy-surface_detail", "sphere-null", "box-null",
          "sphere-absorption+vignetting"]
 
 
@@ -196,11 +297,15 @@ def build_scene(root: Path, kind: str) -> Path:
     if not (root / "env.exr").exists():
         _assets(root)
     _conftest()
-    from conftest import box_object_toml, sphere_scene_toml
+    from conftest import box_object_toml, make_noisy_sphere, sphere_scene_toml
 
     fit = {"box": ["environment.scale", "paint.reflectance"], "sphere": ["environment.scale"],
-           "cloth": ["environment.scale", "cloth.reflectance"]}[kind]
+           "cloth": ["environment.scale", "cloth.reflectance"], "noisy": ["environment.scale"]}[kind]
     text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (box_object_toml() if kind == "box" else "")
+    if kind == "noisy":
+        if not (root / "sphere_noisy.ply").exists():
+            make_noisy_sphere(root / "sphere_noisy.ply", NOISE_M, seed=0)
+        text = text.replace('mesh = "sphere.ply"', 'mesh = "sphere_noisy.ply"')
     path = root / f"{kind}.toml"
     path.write_text(text)
     return path

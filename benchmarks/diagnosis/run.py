@@ -65,6 +65,9 @@ def run_case(case, root: Path, args) -> dict:
     wall = time.perf_counter() - t0
     out = result.to_json()
     recovered = {p: v for f in out["findings"] for p, v in f["parameters"].items()}
+    # A true value of a parameter the scene file fits (a wrong cloth reflectance): its final fit.
+    recovered.update({p: np.asarray(v).tolist() for p, v in result.final.values.items()
+                      if p in case.truth and p not in recovered})
     base = out["baseline"]
     final_holdout = result.final.rmse("holdout")
     return {"case": case.name, "scene": case.scene, "hidden": list(case.hidden),
@@ -83,7 +86,9 @@ def run_case(case, root: Path, args) -> dict:
             # than their standard error when it was added; abs.diagnosis.compensation).
             "compensating": {f["effect"]: [c["parameter"] for c in f["compensation"] if c["compensating"]]
                              for f in out["findings"]},
-            "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1)}
+            "candidates": out["candidates"], "notes": result.notes, "wall_s": round(wall, 1),
+            # Where the baseline's residual sits, as the report labels it (the three largest).
+            "regions": [[r["where"], r["share_of_residual"]] for r in out["regions"][:3]]}
 
 
 def _fmt(v) -> str:

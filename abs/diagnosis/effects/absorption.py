@@ -4,23 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import GlassField
 
 
 @register
-class Absorption(Effect):
+class Absorption(GlassField):
     name = "absorption"
-
-    def targets(self, scene, compiled) -> list[str]:
-        # Glass with an absorption field at its null value (clear), whatever its material type.
-        return [name for name, m in scene.materials.items()
-                if m.transmissive and missing(scene, compiled.specs, f"{name}.absorption")]
-
-    def add(self, data: dict, target: str) -> None:
-        data["materials"][target]["absorption"] = [0.0, 0.0, 0.0]
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (f"{target}.absorption",)
+    field = "absorption"
+    null = [0.0, 0.0, 0.0]
 
     def explain(self, target: str, values: dict) -> str:
         sigma = np.asarray(values[f"{target}.absorption"], float)

@@ -4,23 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import EnvironmentField
 
 _PARAMETER = "environment.inverse_distance"
 
 
 @register
-class EnvironmentDistance(Effect):
+class EnvironmentDistance(EnvironmentField):
     name = "env_distance"
-
-    def targets(self, scene, compiled) -> list[str]:
-        return ["environment"] if missing(scene, compiled.specs, _PARAMETER) else []
-
-    def add(self, data: dict, target: str) -> None:
-        data["environment"]["inverse_distance"] = 0.0
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (_PARAMETER,)
+    field = "inverse_distance"
+    null = 0.0
 
     def explain(self, target: str, values: dict) -> str:
         inv = float(np.asarray(values[_PARAMETER], float).ravel()[0])

@@ -6,23 +6,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import EnvironmentField
 
 _PARAMETER = "environment.orientation"
 
 
 @register
-class EnvironmentRotation(Effect):
+class EnvironmentRotation(EnvironmentField):
     name = "environment_rotation"
-
-    def targets(self, scene, compiled) -> list[str]:
-        return ["environment"] if missing(scene, compiled.specs, _PARAMETER) else []
-
-    def add(self, data: dict, target: str) -> None:
-        data["environment"]["orientation"] = [0.0, 0.0, 0.0]
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (_PARAMETER,)
+    field = "orientation"
+    null = [0.0, 0.0, 0.0]
 
     def explain(self, target: str, values: dict) -> str:
         r = np.asarray(values[_PARAMETER], float).ravel()

@@ -1,32 +1,21 @@
 """Shared base of the effects that live in the scene's ``[sensor]`` table (vignetting, camera
-response, stray light): the table always exists with null defaults, so the effect is missing
-when its field is at the null value and not fitted."""
+response, stray light, colour matrix, camera misalignment): the table always exists with null
+defaults, so the effect is missing when its field is at the null value and not fitted."""
 
 from __future__ import annotations
 
-from typing import ClassVar
-
-from abs.diagnosis.effects.base import Effect, missing
+from abs.diagnosis.effects.fields import TableField
 
 __all__ = ["SensorField"]
 
 
-class SensorField(Effect):
-    """An effect that is one field of ``[sensor]``."""
+class SensorField(TableField):
+    """An effect that is one field of ``[sensor]``; its null value is the field's default."""
 
-    field: ClassVar[str]
+    table = "sensor"
 
     @property
-    def parameter(self) -> str:
-        return f"sensor.{self.field}"
-
-    def targets(self, scene, compiled) -> list[str]:
-        return ["sensor"] if missing(scene, compiled.specs, self.parameter) else []
-
-    def add(self, data: dict, target: str) -> None:
+    def null(self) -> list:
         from abs.scene.scene import SensorSpec
 
-        data.setdefault("sensor", {})[self.field] = SensorSpec.null(self.field).tolist()
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (self.parameter,)
+        return SensorSpec.null(self.field).tolist()

@@ -5,26 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from abs.diagnosis.effects.base import Effect, missing, register
+from abs.diagnosis.effects.base import register
+from abs.diagnosis.effects.fields import GlassField
 
 
 @register
-class SurfaceRoughness(Effect):
+class SurfaceRoughness(GlassField):
     name = "surface_roughness"
+    field = "roughness"
+    null = 0.0
     # A rough interface spreads light symmetrically about the smooth direction: images change to
     # second order in the roughness, so the score test is blind to it.
     zero_null_derivative = True
-
-    def targets(self, scene, compiled) -> list[str]:
-        # Glass whose roughness can be, and is, 0 (roughdielectric's cannot: it has no null).
-        return [name for name, m in scene.materials.items()
-                if m.transmissive and missing(scene, compiled.specs, f"{name}.roughness")]
-
-    def add(self, data: dict, target: str) -> None:
-        data["materials"][target]["roughness"] = 0.0
-
-    def parameters(self, target: str) -> tuple[str, ...]:
-        return (f"{target}.roughness",)
 
     def probe(self, target: str) -> dict[str, list]:
         # Beckmann alpha 0.05: a blur of about 3 degrees, visible through a few cm of glass yet

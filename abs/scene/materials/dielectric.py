@@ -1,8 +1,11 @@
-"""``dielectric``: glass with per-channel IOR, Beer-Lambert absorption (1/m) and optional surface
-roughness (Beckmann alpha; 0, the default, is exactly the smooth interface)."""
+"""``dielectric``: glass with per-channel IOR, Beer-Lambert absorption (1/m), optional surface
+roughness (Beckmann alpha; 0, the default, is exactly the smooth interface) and optional
+smoothing of its meshes' shading normals (``normal_smoothing``; 0, the default, is the meshes'
+normals as loaded)."""
 
 from __future__ import annotations
 
+from abs.params.setters import NormalSmoothingSetter, Setter
 from abs.scene.fields import Fields
 from abs.scene.materials.base import Material, ParameterSpec, register
 
@@ -14,13 +17,15 @@ class Dielectric(Material):
 
     @classmethod
     def from_fields(cls, name: str, fields: Fields) -> "Dielectric":
-        fields.check_known({"type", "ior", "absorption", "roughness"})
+        fields.check_known({"type", "ior", "absorption", "roughness", "normal_smoothing"})
         self = cls(name)
         self.ior_rgb = fields.rgb("ior", 1.5, lower=1.0, upper=3.0)
         self.absorption_per_m = fields.rgb("absorption", 0.0, lower=0.0)
         self.roughness = fields.number("roughness", 0.0, lower=0.0, upper=1.0)
+        self.normal_smoothing = fields.number("normal_smoothing", 0.0, lower=-1.0, upper=1.0)
         self._toml = {"type": cls.type_name, "ior": self.ior_rgb.tolist(),
-                      "absorption": self.absorption_per_m.tolist(), "roughness": self.roughness}
+                      "absorption": self.absorption_per_m.tolist(), "roughness": self.roughness,
+                      "normal_smoothing": self.normal_smoothing}
         return self
 
     def to_mitsuba(self) -> dict:
@@ -40,4 +45,16 @@ class Dielectric(Material):
                                         null=0.0),
             "roughness": ParameterSpec("roughness", 1, "1", 0.0, 1.0, "roughness", moves_paths=True,
                                        null=0.0),
+            # The fraction of each vertex normal's difference from its neighbours' mean removed
+            # (> 0: smoother, 1: the mean) or added (< 0: detail exaggerated); 0: the meshes as
+            # loaded. It moves what is seen through the glass like an IOR does, so derivatives
+            # by central differences for the same reason (edges seen through refraction).
+            "normal_smoothing": ParameterSpec("normal_smoothing", 1, "1", -1.0, 1.0, None,
+                                              moves_paths=True, difference_step=0.05,
+                                              typical_step=0.1, null=0.0),
         }
+
+    def setter(self, field: str) -> Setter:
+        if field == "normal_smoothing":  # the meshes' normals, not a BSDF value
+            return NormalSmoothingSetter(self.name)
+        return super().setter(field)
