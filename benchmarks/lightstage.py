@@ -28,6 +28,15 @@ over the object mask of every held-out frame (each exposure), pixel values in [0
 benchmarks/results/lightstage.json is from ``--positions 40`` (the thesis size).
 
 Writes benchmarks/results/lightstage.json.
+
+Light calibration (issue 27, part 3), ``--calibration``: a true rig perturbed from the dome's
+geometry file (abs.lightstage.calsim: LEDs moved by N(0, 8 mm) per axis, intensities x U(0.75, 1.25)
+per LED and +-5 % per channel, a cos^10 profile where the file says cos^4), its simulated
+mirror-ball frames (12 turntable stops, 8x the session's resolution) and grey-board frames; the
+calibration's recovered positions, exponent and intensities against the truth; then the
+``--calibration-object`` sphere captured by the true rig, measured and fitted three times: with the
+geometry file as designed, with the calibrated geometry, and with the true geometry (the floor).
+Writes benchmarks/results/lightstage_calibration.json.
 """
 
 from __future__ import annotations
@@ -49,6 +58,7 @@ from abs.lightstage.render import AnalyticMaterial, fitted_reflectance, render_v
 from abs.lightstage.session import LightGroup, merge_bracket
 
 RESULTS = Path(__file__).resolve().parent / "results" / "lightstage.json"
+CALIBRATION_RESULTS = RESULTS.with_name("lightstage_calibration.json")
 RADIUS = 0.05
 EXPOSURES = (0.0025, 0.01, 0.04)
 THESIS_TABLE_4_1 = {
@@ -115,7 +125,9 @@ def simulate(geometry, truth_tracer: MeshTracer, mat: AnalyticMaterial, position
     return groups, merged, raw
 
 
-def run_object(name: str, args, geometry) -> dict:
+def run_object(name: str, args, geometry, truth_geometry=None) -> dict:
+    """Simulate ``name`` with ``truth_geometry`` (default: ``geometry``), measure, fit and evaluate
+    it with ``geometry``."""
     rng = np.random.default_rng(27)
     mat, spec_truth = material(name)
     fine = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
@@ -123,7 +135,7 @@ def run_object(name: str, args, geometry) -> dict:
     coarse = trimesh.creation.icosphere(subdivisions=3, radius=RADIUS)
     tracer, points = prepare(coarse, args.spacing)
     t0 = time.time()
-    groups, merged, raw = simulate(geometry, truth_tracer, mat, args.positions, rng)
+    groups, merged, raw = simulate(truth_geometry or geometry, truth_tracer, mat, args.positions, rng)
     t_sim = time.time() - t0
     meas = measure(geometry, tracer, points, groups, merged)
     t_meas = time.time() - t0 - t_sim
@@ -168,16 +180,86 @@ def run_object(name: str, args, geometry) -> dict:
     return out
 
 
+def run_calibration(args, geometry) -> dict:
+    """Calibrate a perturbed rig from simulated frames; measure/fit with and without calibration."""
+    from abs.lightstage.calibration import BallFrame, CalibrationData, calibrate
+    from abs.lightstage.calsim import (BALL_CENTER, BALL_RADIUS, BOARD_ALBEDO, BOARD_CORNERS, ball_frame,
+                                       board_frame, perturbed_rig)
+    from abs.lightstage.greyboard import BoardFrame, board_tracer
+
+    rng = np.random.default_rng(2027)
+    truth = perturbed_rig(geometry, rng)
+    t0 = time.time()
+    angles = np.arange(0.0, 360.0, 30.0)
+    ball = [BallFrame(a, k, 255, 0.01, ball_frame(truth, a, k, rng)) for a in angles for k in sorted(geometry.leds)]
+    tracer = board_tracer(BOARD_CORNERS)
+    board = [BoardFrame(0.0, k, 255, 0.02, board_frame(truth, tracer, 0.0, k, 0.02, rng))
+             for k in sorted(geometry.leds)]
+    t_sim = time.time() - t0
+    calibrated, report = calibrate(geometry, CalibrationData(BALL_CENTER, BALL_RADIUS, BOARD_CORNERS,
+                                                             BOARD_ALBEDO, ball, board))
+    t_cal = time.time() - t0 - t_sim
+    names = sorted(geometry.leds)
+
+    def position_mm(g):
+        e = 1e3 * np.array([np.linalg.norm(g.leds[k].position - truth.leds[k].position) for k in names])
+        return {"median": round(float(np.median(e)), 3), "rms": round(float(np.sqrt(np.mean(e ** 2))), 3),
+                "max": round(float(e.max()), 3)}
+
+    def intensity_rel(g):
+        e = np.abs(np.array([g.leds[k].intensity / truth.leds[k].intensity - 1.0 for k in names]))
+        return {"median": round(float(np.median(e)), 5), "max": round(float(e.max()), 5)}
+
+    out = {"truth": {"position_sigma_mm": 8.0, "intensity_spread": 0.25,
+                     "attenuation_exponent": truth.attenuation.exponent},
+           "geometry_file": {"attenuation_exponent": geometry.attenuation.exponent},
+           "ball": {"center_m": BALL_CENTER.tolist(), "radius_m": BALL_RADIUS, "stops": len(angles),
+                    "frame_size": f"{8 * geometry.cameras[0].width}x{8 * geometry.cameras[0].height}"},
+           "board": {"corners_m": BOARD_CORNERS.tolist(), "albedo": BOARD_ALBEDO.tolist(),
+                     "frame_size": f"{geometry.cameras[0].width}x{geometry.cameras[0].height}"},
+           "led_position_error_mm": {"geometry_file": position_mm(geometry), "calibrated": position_mm(calibrated)},
+           "led_intensity_relative_error": {"geometry_file": intensity_rel(geometry),
+                                            "calibrated": intensity_rel(calibrated)},
+           "attenuation_exponent": {"truth": truth.attenuation.exponent, "geometry_file": geometry.attenuation.exponent,
+                                    "calibrated": round(calibrated.attenuation.exponent, 4)},
+           "attenuation_measured_up_to_deg": report["attenuation"]["measured_up_to_deg"],
+           "report": report, "seconds": {"simulate": round(t_sim, 1), "calibrate": round(t_cal, 1)},
+           "object": args.calibration_object, "fits": {}}
+    for label, g in (("geometry_file", geometry), ("calibrated", calibrated), ("truth", truth)):
+        print(f"calibration: {args.calibration_object} measured with the {label} geometry ...", flush=True)
+        r = run_object(args.calibration_object, args, g, truth)
+        out["fits"][label] = {k: r[k] for k in ("mae_eq_4_1_held_out", "converged_fraction", "points_fitted",
+                                                 "recovered_parameters", "seconds")}
+        print(json.dumps(r["mae_eq_4_1_held_out"]), flush=True)
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--positions", type=int, default=12, help="turntable stops (thesis: 40)")
     parser.add_argument("--size", default="64x48", help="image size WxH")
     parser.add_argument("--spacing", type=float, default=0.01, help="surface point spacing, metres")
     parser.add_argument("--objects", default="lambert_textured,blinn_phong_specular,cook_torrance_specular")
-    parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--out", type=Path, default=None,
+                        help=f"results file (default {RESULTS.name}, {CALIBRATION_RESULTS.name} with --calibration)")
+    parser.add_argument("--calibration", action="store_true",
+                        help="run the light-calibration benchmark instead (module docstring)")
+    parser.add_argument("--calibration-object", default="blinn_phong_specular")
     args = parser.parse_args()
     width, height = (int(x) for x in args.size.split("x"))
     geometry = dome(width, height)
+    if args.calibration:
+        out = args.out or CALIBRATION_RESULTS
+        import subprocess
+
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).resolve().parent).stdout.strip()
+        result = {"commit": commit, "settings": {"positions": args.positions, "size": args.size, "spacing_m": args.spacing,
+                               "leds": len(geometry.leds)}, **run_calibration(args, geometry)}
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(result, indent=1) + "\n")
+        print(f"wrote {out}")
+        return
     results = {"settings": {"positions": args.positions, "size": args.size, "leds": len(geometry.leds),
                             "exposures_s": EXPOSURES, "spacing_m": args.spacing,
                             "measured_mesh": "icosphere level 3 (1280 triangles)",
@@ -191,9 +273,10 @@ def main() -> None:
         r = results["objects"][name]
         print(json.dumps({k: r[k] for k in ("mae_eq_4_1_held_out", "converged_fraction", "seconds")}),
               flush=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1) + "\n")
-    print(f"wrote {args.out}")
+    out = args.out or RESULTS
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=1) + "\n")
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ Format ``"abs-lightstage-geometry/1"`` (JSON), world frame of docs/conventions.m
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +65,19 @@ class Camera:
     width: int
     height: int
 
+    def resized(self, width: int, height: int) -> Camera:
+        """This camera taking images of ``width x height`` pixels (the same field of view).
+
+        Calibration frames may be taken at the sensor's full size while a session is binned
+        down: the intrinsics scale by ``s = width / self.width`` about the pixel-centre
+        convention's origin, ``u' = s (u + 0.5) - 0.5``. Raises ValueError if the aspect differs.
+        """
+        s = width / self.width
+        if abs(height / self.height - s) > 1e-9:
+            raise ValueError(f"image {width}x{height} is not a scaled {self.width}x{self.height}")
+        S = np.array([[s, 0.0, 0.5 * s - 0.5], [0.0, s, 0.5 * s - 0.5], [0.0, 0.0, 1.0]])
+        return Camera(S @ self.K, self.R, self.t, width, height)
+
 
 @dataclass(frozen=True)
 class Led:
@@ -89,6 +102,13 @@ class RigGeometry:
     def object_to_world(self, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """``(M, c)`` with ``X_world = M (X_object - c) + c`` at turntable angle ``angle_deg``."""
         return turntable_rotation(self.turntable_axis, angle_deg), self.turntable_center
+
+    def with_image_size(self, camera: int, width: int, height: int) -> RigGeometry:
+        """This geometry with camera ``camera`` taking ``width x height`` images
+        (:meth:`Camera.resized`)."""
+        cams = list(self.cameras)
+        cams[camera] = cams[camera].resized(width, height)
+        return replace(self, cameras=tuple(cams))
 
     def to_dict(self) -> dict[str, Any]:
         return {
