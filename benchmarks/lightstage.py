@@ -182,18 +182,18 @@ def run_object(name: str, args, geometry, truth_geometry=None) -> dict:
 
 def run_calibration(args, geometry) -> dict:
     """Calibrate a perturbed rig from simulated frames; measure/fit with and without calibration."""
-    from abs.lightstage.calibration import BallFrame, CalibrationData, calibrate
+    from abs.lightstage.calibration import CalibrationData, calibrate
     from abs.lightstage.calsim import (BALL_CENTER, BALL_RADIUS, BOARD_ALBEDO, BOARD_CORNERS, ball_frame,
                                        board_frame, perturbed_rig)
-    from abs.lightstage.greyboard import BoardFrame, board_tracer
+    from abs.lightstage.greyboard import LedFrame, board_tracer
 
     rng = np.random.default_rng(2027)
     truth = perturbed_rig(geometry, rng)
     t0 = time.time()
     angles = np.arange(0.0, 360.0, 30.0)
-    ball = [BallFrame(a, k, 255, 0.01, ball_frame(truth, a, k, rng)) for a in angles for k in sorted(geometry.leds)]
+    ball = [LedFrame(a, k, 255, 0.01, ball_frame(truth, a, k, rng)) for a in angles for k in sorted(geometry.leds)]
     tracer = board_tracer(BOARD_CORNERS)
-    board = [BoardFrame(0.0, k, 255, 0.02, board_frame(truth, tracer, 0.0, k, 0.02, rng))
+    board = [LedFrame(0.0, k, 255, 0.02, board_frame(truth, tracer, 0.0, k, 0.02, rng))
              for k in sorted(geometry.leds)]
     t_sim = time.time() - t0
     calibrated, report = calibrate(geometry, CalibrationData(BALL_CENTER, BALL_RADIUS, BOARD_CORNERS,

@@ -11,12 +11,12 @@ import pytest
 
 from abs.camera.pinhole import project
 from abs.cli.main import main
-from abs.lightstage.calibration import BallFrame, CalibrationData, calibrate
+from abs.lightstage.calibration import CalibrationData, calibrate
 from abs.lightstage.calsim import (BALL_CENTER, BALL_RADIUS, BOARD_ALBEDO, BOARD_CORNERS, ball_frame,
                                    board_frame, perturbed_rig, write_calibration_folder)
 from abs.lightstage.dome import dome_geometry
 from abs.lightstage.geometry import read_geometry, write_geometry
-from abs.lightstage.greyboard import BoardFrame, board_samples, board_tracer, fit_board
+from abs.lightstage.greyboard import LedFrame, board_samples, board_tracer, fit_board
 from abs.lightstage.ledball import triangulate_led
 
 
@@ -71,7 +71,7 @@ def test_mirror_ball_recovers_perturbed_led_positions():
     designed = _dome()
     rng = np.random.default_rng(5)
     truth = perturbed_rig(designed, rng)
-    frames = [BallFrame(a, k, 255, 0.01, ball_frame(truth, a, k, rng, scale=8))
+    frames = [LedFrame(a, k, 255, 0.01, ball_frame(truth, a, k, rng, scale=8))
               for a in np.arange(0.0, 360.0, 45.0) for k in sorted(designed.leds)]
     calibrated, report = calibrate(designed, CalibrationData(BALL_CENTER, BALL_RADIUS, None, None, frames, []))
     before, after = _errors_mm(designed, truth), _errors_mm(calibrated, truth)
@@ -90,7 +90,7 @@ def test_grey_board_recovers_attenuation_exponent_and_intensities():
     rng = np.random.default_rng(6)
     truth = perturbed_rig(designed, rng, exponent=10.0)
     tracer = board_tracer(BOARD_CORNERS)
-    frames = [BoardFrame(0.0, k, 255, 0.02, board_frame(truth, tracer, 0.0, k, 0.02, rng))
+    frames = [LedFrame(0.0, k, 255, 0.02, board_frame(truth, tracer, 0.0, k, 0.02, rng))
               for k in sorted(designed.leds)]
     # The file with the true positions but the designed intensities and profile.
     known_positions = designed.__class__(designed.cameras, {k: designed.leds[k].__class__(

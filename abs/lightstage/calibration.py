@@ -35,25 +35,13 @@ import numpy as np
 from abs.errors import InputError, read_json
 from abs.io.images import read_image
 from abs.lightstage.attenuation import Attenuation
-from abs.lightstage.geometry import Led, RigGeometry
-from abs.lightstage.greyboard import BoardFrame, board_samples, board_tracer, fit_board
+from abs.lightstage.geometry import RigGeometry, finite_array
+from abs.lightstage.greyboard import LedFrame, board_samples, board_tracer, fit_board
 from abs.lightstage.ledball import highlight_centroid, reflected_ray, triangulate_led
 
-__all__ = ["CALIBRATION_FORMAT", "BallFrame", "CalibrationData", "read_calibration", "calibrate"]
+__all__ = ["CALIBRATION_FORMAT", "CalibrationData", "read_calibration", "calibrate"]
 
 CALIBRATION_FORMAT = "abs-lightstage-calibration/1"
-
-
-@dataclass(frozen=True)
-class BallFrame:
-    """One frame of the mirror ball lit by one LED (fields as :class:`BoardFrame`)."""
-
-    angle_deg: float
-    light: str
-    level: int
-    exposure_s: float
-    image: np.ndarray
-    camera: int = 0
 
 
 @dataclass(frozen=True)
@@ -70,26 +58,16 @@ class CalibrationData:
         (4, 3) board corners, object frame, metres.
     board_albedo : np.ndarray or None
         (3,) board albedo.
-    ball_frames, board_frames : list
-        :class:`BallFrame` and :class:`~abs.lightstage.greyboard.BoardFrame`.
+    ball_frames, board_frames : list of LedFrame
+        Frames of the ball and of the board (:class:`~abs.lightstage.greyboard.LedFrame`).
     """
 
     ball_center: np.ndarray | None
     ball_radius: float | None
     board_corners: np.ndarray | None
     board_albedo: np.ndarray | None
-    ball_frames: list[BallFrame]
-    board_frames: list[BoardFrame]
-
-
-def _floats(path: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
-    try:
-        out = np.asarray(value, np.float64)
-    except (TypeError, ValueError):
-        out = None
-    if out is None or out.shape != shape or not np.all(np.isfinite(out)):
-        raise InputError(path, name, f"expected finite numbers of shape {shape}, got {value!r}")
-    return out
+    ball_frames: list[LedFrame]
+    board_frames: list[LedFrame]
 
 
 def read_calibration(folder: str | Path) -> CalibrationData:
@@ -104,16 +82,16 @@ def read_calibration(folder: str | Path) -> CalibrationData:
         ball = data["ball"]
         if not isinstance(ball, dict):
             raise InputError(path, "ball", "expected an object with center and radius")
-        center = _floats(path, "ball.center", ball.get("center"), (3,))
-        radius = float(_floats(path, "ball.radius", ball.get("radius"), ()))
+        center = finite_array(path, "ball.center", ball.get("center"), (3,))
+        radius = float(finite_array(path, "ball.radius", ball.get("radius"), ()))
         if not radius > 0:
             raise InputError(path, "ball.radius", f"must be > 0, got {radius}")
     if "board" in data:
         board = data["board"]
         if not isinstance(board, dict):
             raise InputError(path, "board", "expected an object with corners and albedo")
-        corners = _floats(path, "board.corners", board.get("corners"), (4, 3))
-        albedo = _floats(path, "board.albedo", board.get("albedo"), (3,))
+        corners = finite_array(path, "board.corners", board.get("corners"), (4, 3))
+        albedo = finite_array(path, "board.albedo", board.get("albedo"), (3,))
         if not np.all(albedo > 0):
             raise InputError(path, "board.albedo", f"must be > 0 per channel, got {albedo.tolist()}")
     frames = data.get("frames")
@@ -137,18 +115,17 @@ def read_calibration(folder: str | Path) -> CalibrationData:
             raise InputError(path, f"{name}.level", f"expected an integer in 1..255, got {level!r}")
         if not isinstance(exposure, (int, float)) or not exposure > 0:
             raise InputError(path, f"{name}.exposure_s", f"expected a number > 0, got {exposure!r}")
-        angle = float(_floats(path, f"{name}.angle_deg", f.get("angle_deg"), ()))
+        angle = float(finite_array(path, f"{name}.angle_deg", f.get("angle_deg"), ()))
         file = f.get("file")
         if not isinstance(file, str):
             raise InputError(path, f"{name}.file", "expected a path relative to the folder")
         image = read_image(folder / file)
-        cls = BallFrame if target == "ball" else BoardFrame
         (ball_frames if target == "ball" else board_frames).append(
-            cls(angle, light, level, float(exposure), image, int(f.get("camera", 0))))
+            LedFrame(angle, light, level, float(exposure), image, int(f.get("camera", 0))))
     return CalibrationData(center, radius, corners, albedo, ball_frames, board_frames)
 
 
-def _camera(geometry: RigGeometry, frame: BallFrame | BoardFrame):
+def _camera(geometry: RigGeometry, frame: LedFrame):
     """The frame's camera, resized to the frame's image (calibration frames may be full size)."""
     if not 0 <= frame.camera < len(geometry.cameras):
         raise InputError(None, "frames.camera", f"camera {frame.camera} is not in the geometry file")

@@ -38,7 +38,7 @@ from abs.errors import InputError, read_json
 from abs.lightstage.attenuation import Attenuation
 
 __all__ = ["FORMAT", "Camera", "Led", "RigGeometry", "read_geometry", "write_geometry",
-           "turntable_rotation"]
+           "turntable_rotation", "finite_array"]
 
 FORMAT = "abs-lightstage-geometry/1"
 
@@ -132,7 +132,8 @@ def turntable_rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
     return np.eye(3) + np.sin(a) * kx + (1.0 - np.cos(a)) * kx @ kx
 
 
-def _array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+def finite_array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as finite float64 numbers of ``shape``, else an InputError naming ``source`` and ``name``."""
     try:
         out = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -143,7 +144,7 @@ def _array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.nd
 
 
 def _unit(source: Path, name: str, value: Any) -> np.ndarray:
-    v = _array(source, name, value, (3,))
+    v = finite_array(source, name, value, (3,))
     norm = np.linalg.norm(v)
     if norm == 0.0:
         raise InputError(source, name, "must not be the zero vector")
@@ -160,9 +161,9 @@ def _attenuation(source: Path, data: Any) -> Attenuation:
             raise InputError(source, "attenuation.exponent", "expected a number >= 0")
         return Attenuation(float(exponent))
     if kind == "table":
-        angles = _array(source, "attenuation.angles_deg", data.get("angles_deg"),
+        angles = finite_array(source, "attenuation.angles_deg", data.get("angles_deg"),
                         (len(data.get("angles_deg") or []),))
-        values = _array(source, "attenuation.values", data.get("values"), angles.shape)
+        values = finite_array(source, "attenuation.values", data.get("values"), angles.shape)
         if angles.size < 2 or np.any(np.diff(angles) <= 0):
             raise InputError(source, "attenuation.angles_deg", "expected at least 2 increasing angles")
         return Attenuation(None, tuple(angles), tuple(values))
@@ -185,9 +186,9 @@ def read_geometry(path: str | Path) -> RigGeometry:
         size = [c.get("width"), c.get("height")]
         if not all(isinstance(s, int) and s > 0 for s in size):
             raise InputError(path, f"cameras[{i}].width", "width and height must be positive integers")
-        cameras.append(Camera(_array(path, f"cameras[{i}].K", c.get("K"), (3, 3)),
-                              _array(path, f"cameras[{i}].R", c.get("R"), (3, 3)),
-                              _array(path, f"cameras[{i}].t", c.get("t"), (3,)), size[0], size[1]))
+        cameras.append(Camera(finite_array(path, f"cameras[{i}].K", c.get("K"), (3, 3)),
+                              finite_array(path, f"cameras[{i}].R", c.get("R"), (3, 3)),
+                              finite_array(path, f"cameras[{i}].t", c.get("t"), (3,)), size[0], size[1]))
     leds_data = data.get("leds")
     if not isinstance(leds_data, dict) or not leds_data:
         raise InputError(path, "leds", "expected a non-empty object of LEDs by name")
@@ -195,8 +196,8 @@ def read_geometry(path: str | Path) -> RigGeometry:
     for name, led in leds_data.items():
         if not isinstance(led, dict):
             raise InputError(path, f"leds.{name}", "expected an object")
-        intensity = _array(path, f"leds.{name}.intensity", led.get("intensity", [1.0, 1.0, 1.0]), (3,))
-        leds[name] = Led(_array(path, f"leds.{name}.position", led.get("position"), (3,)),
+        intensity = finite_array(path, f"leds.{name}.intensity", led.get("intensity", [1.0, 1.0, 1.0]), (3,))
+        leds[name] = Led(finite_array(path, f"leds.{name}.position", led.get("position"), (3,)),
                          _unit(path, f"leds.{name}.axis", led.get("axis")), intensity)
     table = data.get("turntable", {})
     if not isinstance(table, dict):
@@ -206,7 +207,7 @@ def read_geometry(path: str | Path) -> RigGeometry:
         raise InputError(path, "gain", "expected a number > 0")
     return RigGeometry(tuple(cameras), leds,
                        _unit(path, "turntable.axis", table.get("axis", [0.0, 1.0, 0.0])),
-                       _array(path, "turntable.center", table.get("center", [0.0, 0.0, 0.0]), (3,)),
+                       finite_array(path, "turntable.center", table.get("center", [0.0, 0.0, 0.0]), (3,)),
                        _attenuation(path, data.get("attenuation", {"kind": "cos_power", "exponent": 0})),
                        float(gain))
 

@@ -31,12 +31,12 @@ from abs.lightstage.measure import MIN_COS, led_irradiance, pose_view
 from abs.lightstage.raycast import MeshTracer
 from abs.lightstage.session import SATURATION
 
-__all__ = ["BoardFrame", "board_tracer", "board_samples", "BoardFit", "fit_board"]
+__all__ = ["LedFrame", "board_tracer", "board_samples", "BoardFit", "fit_board"]
 
 
 @dataclass(frozen=True)
-class BoardFrame:
-    """One frame of the grey board lit by one LED.
+class LedFrame:
+    """One calibration frame (of the grey board or the mirror ball) lit by one LED.
 
     Attributes
     ----------
@@ -68,7 +68,7 @@ def board_tracer(corners: np.ndarray) -> MeshTracer:
     return MeshTracer(c, np.array([[0, 1, 2], [0, 2, 3]]))
 
 
-def board_samples(geometry: RigGeometry, tracer: MeshTracer, frames: list[BoardFrame],
+def board_samples(geometry: RigGeometry, tracer: MeshTracer, frames: list[LedFrame],
                   albedo: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """Per LED, ``(cos theta off its axis (N,), y = I_k A(theta) (N, 3))`` over its board pixels.
 
