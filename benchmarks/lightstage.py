@@ -180,8 +180,10 @@ def run_object(name: str, args, geometry, truth_geometry=None) -> dict:
     return out
 
 
-def run_calibration(args, geometry) -> dict:
-    """Calibrate a perturbed rig from simulated frames; measure/fit with and without calibration."""
+def run_calibration(args, geometry, save=None) -> dict:
+    """Calibrate a perturbed rig from simulated frames; measure/fit with and without calibration.
+
+    ``save(result)`` is called after the calibration and after each fit (partial results)."""
     from abs.lightstage.calibration import CalibrationData, calibrate
     from abs.lightstage.calsim import (BALL_CENTER, BALL_RADIUS, BOARD_ALBEDO, BOARD_CORNERS, ball_frame,
                                        board_frame, perturbed_rig)
@@ -225,12 +227,16 @@ def run_calibration(args, geometry) -> dict:
            "attenuation_measured_up_to_deg": report["attenuation"]["measured_up_to_deg"],
            "report": report, "seconds": {"simulate": round(t_sim, 1), "calibrate": round(t_cal, 1)},
            "object": args.calibration_object, "fits": {}}
+    if save:
+        save(out)
     for label, g in (("geometry_file", geometry), ("calibrated", calibrated), ("truth", truth)):
         print(f"calibration: {args.calibration_object} measured with the {label} geometry ...", flush=True)
         r = run_object(args.calibration_object, args, g, truth)
         out["fits"][label] = {k: r[k] for k in ("mae_eq_4_1_held_out", "converged_fraction", "points_fitted",
                                                  "recovered_parameters", "seconds")}
         print(json.dumps(r["mae_eq_4_1_held_out"]), flush=True)
+        if save:
+            save(out)
     return out
 
 
@@ -254,10 +260,14 @@ def main() -> None:
 
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                                 cwd=Path(__file__).resolve().parent).stdout.strip()
-        result = {"commit": commit, "settings": {"positions": args.positions, "size": args.size, "spacing_m": args.spacing,
-                               "leds": len(geometry.leds)}, **run_calibration(args, geometry)}
+        settings = {"commit": commit, "settings": {"positions": args.positions, "size": args.size,
+                                                  "spacing_m": args.spacing, "leds": len(geometry.leds)}}
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(result, indent=1) + "\n")
+
+        def save(part):
+            out.write_text(json.dumps({**settings, **part}, indent=1) + "\n")
+
+        run_calibration(args, geometry, save)
         print(f"wrote {out}")
         return
     results = {"settings": {"positions": args.positions, "size": args.size, "leds": len(geometry.leds),
