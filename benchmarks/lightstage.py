@@ -94,6 +94,35 @@ def material(name: str) -> tuple[AnalyticMaterial, tuple[float, float] | None]:
     return AnalyticMaterial(model, params_at), (ks, shape)
 
 
+BOX_SIZE = 0.08
+BOX_MATERIALS = ("gold-metallic-paint", "green-plastic", "blue-rubber")
+"""The MERL box's regions: its top, the upper and the lower half of its sides (neural MERL fits,
+../shared/data/merl_nbrdf, evaluated directly at each measurement's Rusinkiewicz angles)."""
+
+
+def box_region(p: np.ndarray) -> np.ndarray:
+    """Region index (N,) of object points on the box: 0 top, 1 upper sides, 2 lower sides."""
+    top = p[:, 1] > 0.5 * BOX_SIZE - 1e-6
+    return np.where(top, 0, np.where(p[:, 1] > 0.0, 1, 2))
+
+
+def box_mesh():
+    """An 8 cm cube on the turntable axis, each face with its own vertices (flat normals: a box's
+    shared corner vertices would average the normals of three faces)."""
+    box = trimesh.creation.box(extents=(BOX_SIZE,) * 3)
+    box.unmerge_vertices()
+    return box
+
+
+def merl_box_material():
+    from abs.brdf.nbrdf import evaluate_nbrdf, nbrdf_weights
+    from abs.lightstage.render import MeasuredRegions
+
+    weights = [nbrdf_weights(m) for m in BOX_MATERIALS]
+    return MeasuredRegions(box_region, tuple(
+        (lambda th, td, pd, w=w: evaluate_nbrdf(w, th, td, pd).astype(np.float64)) for w in weights))
+
+
 def dome(width: int, height: int):
     boards, per_board, radius = 3, 12, 0.5
     pos = np.zeros((boards, per_board, 3))
@@ -129,6 +158,8 @@ def run_object(name: str, args, geometry, truth_geometry=None) -> dict:
     """Simulate ``name`` with ``truth_geometry`` (default: ``geometry``), measure, fit and evaluate
     it with ``geometry``."""
     rng = np.random.default_rng(27)
+    if name == "merl_box":
+        return run_box(args, geometry, rng)
     mat, spec_truth = material(name)
     fine = trimesh.creation.icosphere(subdivisions=5, radius=RADIUS)
     truth_tracer = MeshTracer(fine.vertices, fine.faces, fine.vertex_normals)
@@ -178,6 +209,65 @@ def run_object(name: str, args, geometry, truth_geometry=None) -> dict:
     if spec_truth is not None:
         out["cook_torrance_beats_lambert"] = bool(result["cook_torrance"] < result["lambert"])
     return out
+
+
+def run_box(args, geometry, rng) -> dict:
+    """The box with regions of measured MERL materials: simulate, measure, fit, held-out MAE, per
+    region too (no analytic truth: the models are judged on the held-out frames only)."""
+    mat = merl_box_material()
+    box = box_mesh()
+    truth_tracer = MeshTracer(box.vertices, box.faces, box.vertex_normals)
+    tracer, points = prepare(box, args.box_spacing)
+    t0 = time.time()
+    groups, merged, raw = simulate(geometry, truth_tracer, mat, args.positions, rng)
+    t_sim = time.time() - t0
+    meas = measure(geometry, tracer, points, groups, merged)
+    fits = fit_measurements(meas, len(points))
+    t_fit = time.time() - t0 - t_sim
+    frames = [(0, g.angle_deg, g.light, 255, t, img)
+              for g, imgs in zip(groups, raw) if is_held_out(g.position, g.light, geometry)
+              for t, img in zip(EXPOSURES, imgs)]
+    reflectances = {m: fitted_reflectance(fits, m, points) for m in MODELS}
+    result = evaluate_held_out(geometry, tracer, frames, reflectances)
+    # Per region: the same Eq. 4.1 over the held-out pixels whose ray lands in that region.
+    per_region = {}
+    for r, name in enumerate(BOX_MATERIALS):
+        def in_region(points_, r=r):
+            return box_region(points_) == r
+
+        sub = []
+        for cam, angle, light, level, t, img in frames:
+            view = pose_view(geometry, tracer, cam, angle)
+            keep = np.zeros(img.shape[0] * img.shape[1], bool)
+            keep[view.pixel[in_region(view.hits.point)]] = True
+            sub.append((cam, angle, light, level, t, np.where(keep.reshape(img.shape[:2])[:, :, None], img, np.nan)))
+        per_region[name] = _region_mae(geometry, tracer, sub, reflectances)
+    fitted = fits.count > 0
+    return {"materials_by_region": dict(zip(("top", "upper sides", "lower sides"), BOX_MATERIALS)),
+            "mae_eq_4_1_held_out": {m: round(v, 6) for m, v in result.items()},
+            "mae_eq_4_1_held_out_by_region": per_region,
+            "converged_fraction": fits.converged_fraction(),
+            "points": len(points), "points_fitted": int(fitted.sum()),
+            "measurements": len(meas), "held_out_frames": len(frames),
+            "median_measurements_per_fitted_point": float(np.median(fits.count[fitted])),
+            "cook_torrance_beats_lambert": bool(result["cook_torrance"] < result["lambert"]),
+            "seconds": {"simulate": round(t_sim, 1), "measure_and_fit": round(t_fit, 1)}}
+
+
+def _region_mae(geometry, tracer, frames, reflectances) -> dict:
+    """Eq. 4.1 over the non-NaN pixels of ``frames`` (NaN marks pixels outside the region)."""
+    from abs.lightstage.render import mae
+
+    sums, count = {m: 0.0 for m in reflectances}, 0
+    for cam, angle, light, level, t, img in frames:
+        view = pose_view(geometry, tracer, cam, angle)
+        mask = np.isfinite(img[:, :, 0]).ravel()
+        n = 0
+        for m, refl in reflectances.items():
+            s_, n = mae(render_view(geometry, tracer, view, light, level, t, refl), np.nan_to_num(img), mask)
+            sums[m] += s_
+        count += n
+    return {m: round(sums[m] / max(count, 1), 6) for m in reflectances}
 
 
 def run_calibration(args, geometry, save=None) -> dict:
@@ -245,7 +335,10 @@ def main() -> None:
     parser.add_argument("--positions", type=int, default=12, help="turntable stops (thesis: 40)")
     parser.add_argument("--size", default="64x48", help="image size WxH")
     parser.add_argument("--spacing", type=float, default=0.01, help="surface point spacing, metres")
-    parser.add_argument("--objects", default="lambert_textured,blinn_phong_specular,cook_torrance_specular")
+    parser.add_argument("--box-spacing", type=float, default=0.03,
+                        help="surface point spacing on the MERL box, metres (0.03: 4x4 points a face)")
+    parser.add_argument("--objects", default="lambert_textured,blinn_phong_specular,cook_torrance_specular,merl_box",
+                        help="objects to run; the results file keeps the entries of the others")
     parser.add_argument("--out", type=Path, default=None,
                         help=f"results file (default {RESULTS.name}, {CALIBRATION_RESULTS.name} with --calibration)")
     parser.add_argument("--calibration", action="store_true",
@@ -254,12 +347,12 @@ def main() -> None:
     args = parser.parse_args()
     width, height = (int(x) for x in args.size.split("x"))
     geometry = dome(width, height)
+    import subprocess
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).resolve().parent).stdout.strip()
     if args.calibration:
         out = args.out or CALIBRATION_RESULTS
-        import subprocess
-
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=Path(__file__).resolve().parent).stdout.strip()
         settings = {"commit": commit, "settings": {"positions": args.positions, "size": args.size,
                                                   "spacing_m": args.spacing, "leds": len(geometry.leds)}}
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -277,13 +370,17 @@ def main() -> None:
                             "noise": "Gaussian, sigma 0.003 + 0.01 x value, then clipped at 1",
                             "held_out": "light groups with (position + LED index) % 5 == 0"},
                "thesis_table_4_1": THESIS_TABLE_4_1, "objects": {}}
+    out = args.out or RESULTS
+    if out.exists():
+        # Objects not run now keep their earlier entries (each entry names its commit where known).
+        results["objects"] = json.loads(out.read_text()).get("objects", {})
     for name in args.objects.split(","):
         print(f"{name} ...", flush=True)
-        results["objects"][name] = run_object(name, args, geometry)
+        results["objects"][name] = {"commit": commit, "positions": args.positions,
+                                    **run_object(name, args, geometry)}
         r = results["objects"][name]
         print(json.dumps({k: r[k] for k in ("mae_eq_4_1_held_out", "converged_fraction", "seconds")}),
               flush=True)
-    out = args.out or RESULTS
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1) + "\n")
     print(f"wrote {out}")
