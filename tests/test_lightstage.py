@@ -245,3 +245,29 @@ def test_geometry_file_round_trip_and_tabulated_attenuation(tmp_path):
     cos = np.cos(np.deg2rad([0.0, 15.0, 45.0, 70.0, 120.0]))
     np.testing.assert_allclose(back.attenuation(cos), [1.0, 0.75, 0.25, 0.0, 0.0], atol=1e-12)
     assert back.gain == 50.0
+
+
+def test_measured_regions_render_like_the_analytic_model_they_tabulate():
+    """A region material given Blinn-Phong as a function of Rusinkiewicz angles renders what the
+    analytic Blinn-Phong material renders (same angles, same cos(theta_l) factor), and its regions
+    split the frame where ``region_at`` says."""
+    from abs.lightstage.render import AnalyticMaterial, MeasuredRegions, render_view
+
+    geometry, tracer, _, _ = _plane_rig(32, 24)
+    view = pose_view(geometry, tracer, 0, 20.0)
+    kd, ks, e = np.array([0.2, 0.4, 0.6]), 0.5, 30.0
+
+    def blinn_phong(theta_h, theta_d, phi_d):
+        return kd / np.pi + ks * (e + 8) / (8 * np.pi) * np.cos(theta_h)[:, None] ** e
+
+    analytic = AnalyticMaterial("blinn_phong", lambda p: np.broadcast_to(
+        np.stack([kd, np.full(3, ks), np.full(3, e)], 1)[None], (len(p), 3, 3)))
+    both = MeasuredRegions(lambda p: (p[:, 0] > 0).astype(int),
+                           (blinn_phong, lambda th, td, pd: np.zeros((len(th), 3))))
+    a = render_view(geometry, tracer, view, "b00l00", 255, 0.01, analytic)
+    b = render_view(geometry, tracer, view, "b00l00", 255, 0.01, both)
+    x = view.hits.point[:, 0]
+    flat_a, flat_b = a.reshape(-1, 3)[view.pixel], b.reshape(-1, 3)[view.pixel]
+    assert flat_a[x <= 0].max() > 0.05  # lit, and not clipped everywhere
+    np.testing.assert_allclose(flat_b[x <= 0], flat_a[x <= 0], rtol=1e-9, atol=1e-12)
+    assert np.all(flat_b[x > 0] == 0.0)
