@@ -230,18 +230,9 @@ def run_box(args, geometry, rng) -> dict:
     reflectances = {m: fitted_reflectance(fits, m, points) for m in MODELS}
     result = evaluate_held_out(geometry, tracer, frames, reflectances)
     # Per region: the same Eq. 4.1 over the held-out pixels whose ray lands in that region.
-    per_region = {}
-    for r, name in enumerate(BOX_MATERIALS):
-        def in_region(points_, r=r):
-            return box_region(points_) == r
-
-        sub = []
-        for cam, angle, light, level, t, img in frames:
-            view = pose_view(geometry, tracer, cam, angle)
-            keep = np.zeros(img.shape[0] * img.shape[1], bool)
-            keep[view.pixel[in_region(view.hits.point)]] = True
-            sub.append((cam, angle, light, level, t, np.where(keep.reshape(img.shape[:2])[:, :, None], img, np.nan)))
-        per_region[name] = _region_mae(geometry, tracer, sub, reflectances)
+    per_region = {name: {m: round(v, 6) for m, v in evaluate_held_out(
+        geometry, tracer, frames, reflectances, select=lambda p, r=r: box_region(p) == r).items()}
+        for r, name in enumerate(BOX_MATERIALS)}
     fitted = fits.count > 0
     return {"materials_by_region": dict(zip(("top", "upper sides", "lower sides"), BOX_MATERIALS)),
             "mae_eq_4_1_held_out": {m: round(v, 6) for m, v in result.items()},
@@ -252,22 +243,6 @@ def run_box(args, geometry, rng) -> dict:
             "median_measurements_per_fitted_point": float(np.median(fits.count[fitted])),
             "cook_torrance_beats_lambert": bool(result["cook_torrance"] < result["lambert"]),
             "seconds": {"simulate": round(t_sim, 1), "measure_and_fit": round(t_fit, 1)}}
-
-
-def _region_mae(geometry, tracer, frames, reflectances) -> dict:
-    """Eq. 4.1 over the non-NaN pixels of ``frames`` (NaN marks pixels outside the region)."""
-    from abs.lightstage.render import mae
-
-    sums, count = {m: 0.0 for m in reflectances}, 0
-    for cam, angle, light, level, t, img in frames:
-        view = pose_view(geometry, tracer, cam, angle)
-        mask = np.isfinite(img[:, :, 0]).ravel()
-        n = 0
-        for m, refl in reflectances.items():
-            s_, n = mae(render_view(geometry, tracer, view, light, level, t, refl), np.nan_to_num(img), mask)
-            sums[m] += s_
-        count += n
-    return {m: round(sums[m] / max(count, 1), 6) for m in reflectances}
 
 
 def run_calibration(args, geometry, save=None) -> dict:
