@@ -231,6 +231,21 @@ def run_box(args, geometry, rng) -> dict:
               for g, imgs in zip(groups, raw) if is_held_out(g.position, g.light, geometry)
               for t, img in zip(EXPOSURES, imgs)]
     reflectances = {m: fitted_reflectance(fits, m, points) for m in MODELS}
+    pca = {}
+    if args.basis is not None:
+        # abs's data-driven model per point (abs.lightstage.pcafit), beside the analytic three.
+        from abs.brdf.basis import BRDFBasis
+        from abs.lightstage.pcafit import fit_pca_points, pca_reflectance
+
+        basis = BRDFBasis.load(args.basis)
+        t1 = time.time()
+        pfits = fit_pca_points(basis, meas, len(points))
+        reflectances["brdf_pca"] = pca_reflectance(basis, pfits, points)
+        pca = {"basis": {"file": args.basis.name, "components": basis.n_components,
+                         "training_materials": None if basis.materials is None else len(basis.materials),
+                         "holds_out_the_box_materials": bool(basis.materials is not None and not set(
+                             BOX_MATERIALS) & set(map(str, basis.materials)))},
+               "points_fitted": int((pfits.count > 0).sum()), "seconds": round(time.time() - t1, 1)}
     result = evaluate_held_out(geometry, tracer, frames, reflectances)
     # Per region: the same Eq. 4.1 over the held-out pixels whose ray lands in that region.
     per_region = {name: {m: round(v, 6) for m, v in evaluate_held_out(
@@ -240,7 +255,7 @@ def run_box(args, geometry, rng) -> dict:
     return {"materials_by_region": dict(zip(("top", "upper sides", "lower sides"), BOX_MATERIALS)),
             "mae_eq_4_1_held_out": {m: round(v, 6) for m, v in result.items()},
             "mae_eq_4_1_held_out_by_region": per_region,
-            "converged_fraction": fits.converged_fraction(),
+            "converged_fraction": fits.converged_fraction(), "brdf_pca": pca,
             "points": len(points), "points_fitted": int(fitted.sum()),
             "measurements": len(meas), "held_out_frames": len(frames),
             "median_measurements_per_fitted_point": float(np.median(fits.count[fitted])),
@@ -315,6 +330,8 @@ def main() -> None:
     parser.add_argument("--spacing", type=float, default=0.01, help="surface point spacing, metres")
     parser.add_argument("--box-spacing", type=float, default=0.03,
                         help="surface point spacing on the MERL box, metres (0.03: 4x4 points a face)")
+    parser.add_argument("--basis", type=Path, default=None,
+                        help="a brdf_pca basis (abs brdf build-basis): also fit it per point on the MERL box")
     parser.add_argument("--objects", default="lambert_textured,blinn_phong_specular,cook_torrance_specular,merl_box",
                         help="objects to run; the results file keeps the entries of the others")
     parser.add_argument("--out", type=Path, default=None,

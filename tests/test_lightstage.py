@@ -271,3 +271,34 @@ def test_measured_regions_render_like_the_analytic_model_they_tabulate():
     assert flat_a[x <= 0].max() > 0.05  # lit, and not clipped everywhere
     np.testing.assert_allclose(flat_b[x <= 0], flat_a[x <= 0], rtol=1e-9, atol=1e-12)
     assert np.all(flat_b[x > 0] == 0.0)
+
+
+def test_brdf_pca_coefficients_come_back_from_rendered_frames():
+    """Frames rendered from known per-point brdf_pca coefficients (a 2-component basis: overall
+    level, and a lobe in theta_h), measured and fitted per point, give the coefficients back: the
+    round trip through irradiance division, normalisation and the MERL entry lookup."""
+    from abs.brdf.basis import BRDFBasis
+    from abs.io.merl import MERL_SHAPE, MERL_SIZE
+    from abs.lightstage.pcafit import PcaFits, fit_pca_points, pca_reflectance
+    from abs.lightstage.render import render_view
+
+    theta_h = (np.arange(90) / 90.0) ** 2 * (np.pi / 2)
+    lobe = np.broadcast_to(np.exp(-(theta_h / 0.2) ** 2)[None, :, None, None], MERL_SHAPE).reshape(-1)
+    basis = BRDFBasis(mean=np.zeros(MERL_SIZE, np.float32),
+                      components=np.stack([np.ones(MERL_SIZE), 3.0 * lobe]).astype(np.float32),
+                      median=np.full(MERL_SIZE, 0.3 / np.pi, np.float32), epsilon=1e-3)
+    geometry, tracer, verts, faces = _plane_rig(32, 24)
+    points = build_surface_points(verts, faces, 0.2)  # a few points on the 40 cm square
+    truth = np.stack([np.linspace(-0.3, 0.3, len(points)), np.linspace(0.8, 0.2, len(points))], 1)
+    reflectance = pca_reflectance(basis, PcaFits(truth, np.ones(len(points), int)), points)
+    groups, images = [], []
+    for p, angle in enumerate(np.linspace(-40.0, 40.0, 9)):
+        view = pose_view(geometry, tracer, 0, angle)
+        groups.append(LightGroup(p, angle, "b00l00", 255, (), (1.0,)))
+        images.append(render_view(geometry, tracer, view, "b00l00", 255, 1e-3, reflectance) / 1e-3)
+    assert max(float(im.max()) for im in images) < 0.98e3  # nothing clipped
+    meas = measure(geometry, tracer, points, groups, images, holdout_every=0)
+    fits = fit_pca_points(basis, meas, len(points), eta=1e-6)  # noise-free: next to no prior
+    fitted = fits.count > 0
+    assert fitted.sum() >= len(points) // 2
+    np.testing.assert_allclose(fits.coefficients[fitted], truth[fitted], atol=1e-3)
