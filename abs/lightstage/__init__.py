@@ -18,6 +18,7 @@ One concept a module:
 - :mod:`~abs.lightstage.render`: frames from per-point models (held-out renders), from an
   analytic material or from regions of measured materials (the benchmark's forward model), and
   the MAE of thesis Eq. 4.1;
+- :mod:`~abs.lightstage.pcafit`: abs's data-driven ``brdf_pca`` model fitted per surface point;
 - :mod:`~abs.lightstage.ledball`: LED positions from a mirror ball's highlights;
 - :mod:`~abs.lightstage.greyboard`: the LEDs' radial attenuation and intensities from a grey board;
 - :mod:`~abs.lightstage.calibration`: the calibration folder and the refined geometry file;
