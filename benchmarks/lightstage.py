@@ -15,7 +15,8 @@ Objects: spheres of 5 cm radius with known analytic, spatially varying reflectan
 - ``cook_torrance_specular``: GGX Cook-Torrance, texture x 0.6 as kd, ks = 0.4, alpha = 0.2;
 - ``merl_box``: an 8 cm cube with regions of measured MERL materials (neural fits from
   ../shared/data/merl_nbrdf): gold-metallic-paint top, green-plastic upper and blue-rubber lower
-  sides; no analytic truth, held-out MAE per region as well.
+  sides; no analytic truth, held-out MAE per region as well; with ``--basis B`` also abs's
+  ``brdf_pca`` model fitted per point (abs.lightstage.pcafit).
 
 Frames come from this project's own forward model of the dome (abs.lightstage.render: one ray per
 pixel centre, shadow rays, inverse square and radial attenuation, no inter-reflection), on a finer
