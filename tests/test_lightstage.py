@@ -245,3 +245,60 @@ def test_geometry_file_round_trip_and_tabulated_attenuation(tmp_path):
     cos = np.cos(np.deg2rad([0.0, 15.0, 45.0, 70.0, 120.0]))
     np.testing.assert_allclose(back.attenuation(cos), [1.0, 0.75, 0.25, 0.0, 0.0], atol=1e-12)
     assert back.gain == 50.0
+
+
+def test_measured_regions_render_like_the_analytic_model_they_tabulate():
+    """A region material given Blinn-Phong as a function of Rusinkiewicz angles renders what the
+    analytic Blinn-Phong material renders (same angles, same cos(theta_l) factor), and its regions
+    split the frame where ``region_at`` says."""
+    from abs.lightstage.render import AnalyticMaterial, MeasuredRegions, render_view
+
+    geometry, tracer, _, _ = _plane_rig(32, 24)
+    view = pose_view(geometry, tracer, 0, 20.0)
+    kd, ks, e = np.array([0.2, 0.4, 0.6]), 0.5, 30.0
+
+    def blinn_phong(theta_h, theta_d, phi_d):
+        return kd / np.pi + ks * (e + 8) / (8 * np.pi) * np.cos(theta_h)[:, None] ** e
+
+    analytic = AnalyticMaterial("blinn_phong", lambda p: np.broadcast_to(
+        np.stack([kd, np.full(3, ks), np.full(3, e)], 1)[None], (len(p), 3, 3)))
+    both = MeasuredRegions(lambda p: (p[:, 0] > 0).astype(int),
+                           (blinn_phong, lambda th, td, pd: np.zeros((len(th), 3))))
+    a = render_view(geometry, tracer, view, "b00l00", 255, 0.01, analytic)
+    b = render_view(geometry, tracer, view, "b00l00", 255, 0.01, both)
+    x = view.hits.point[:, 0]
+    flat_a, flat_b = a.reshape(-1, 3)[view.pixel], b.reshape(-1, 3)[view.pixel]
+    assert flat_a[x <= 0].max() > 0.05  # lit, and not clipped everywhere
+    np.testing.assert_allclose(flat_b[x <= 0], flat_a[x <= 0], rtol=1e-9, atol=1e-12)
+    assert np.all(flat_b[x > 0] == 0.0)
+
+
+def test_brdf_pca_coefficients_come_back_from_rendered_frames():
+    """Frames rendered from known per-point brdf_pca coefficients (a 2-component basis: overall
+    level, and a lobe in theta_h), measured and fitted per point, give the coefficients back: the
+    round trip through irradiance division, normalisation and the MERL entry lookup."""
+    from abs.brdf.basis import BRDFBasis
+    from abs.io.merl import MERL_SHAPE, MERL_SIZE
+    from abs.lightstage.pcafit import PcaFits, fit_pca_points, pca_reflectance
+    from abs.lightstage.render import render_view
+
+    theta_h = (np.arange(90) / 90.0) ** 2 * (np.pi / 2)
+    lobe = np.broadcast_to(np.exp(-(theta_h / 0.2) ** 2)[None, :, None, None], MERL_SHAPE).reshape(-1)
+    basis = BRDFBasis(mean=np.zeros(MERL_SIZE, np.float32),
+                      components=np.stack([np.ones(MERL_SIZE), 3.0 * lobe]).astype(np.float32),
+                      median=np.full(MERL_SIZE, 0.3 / np.pi, np.float32), epsilon=1e-3)
+    geometry, tracer, verts, faces = _plane_rig(32, 24)
+    points = build_surface_points(verts, faces, 0.2)  # a few points on the 40 cm square
+    truth = np.stack([np.linspace(-0.3, 0.3, len(points)), np.linspace(0.8, 0.2, len(points))], 1)
+    reflectance = pca_reflectance(basis, PcaFits(truth, np.ones(len(points), int)), points)
+    groups, images = [], []
+    for p, angle in enumerate(np.linspace(-40.0, 40.0, 9)):
+        view = pose_view(geometry, tracer, 0, angle)
+        groups.append(LightGroup(p, angle, "b00l00", 255, (), (1.0,)))
+        images.append(render_view(geometry, tracer, view, "b00l00", 255, 1e-3, reflectance) / 1e-3)
+    assert max(float(im.max()) for im in images) < 0.98e3  # nothing clipped
+    meas = measure(geometry, tracer, points, groups, images, holdout_every=0)
+    fits = fit_pca_points(basis, meas, len(points), eta=1e-6)  # noise-free: next to no prior
+    fitted = fits.count > 0
+    assert fitted.sum() >= len(points) // 2
+    np.testing.assert_allclose(fits.coefficients[fitted], truth[fitted], atol=1e-3)

@@ -1,4 +1,10 @@
-"""``abs lightstage measure|fit|render``: per-point reflectance from a light-stage session.
+"""``abs lightstage calibrate|measure|fit|render``: light calibration and per-point reflectance
+from a light-stage session.
+
+- ``calibrate CALIB --geometry G``: LED positions from a mirror ball's highlights, the ``cos^m``
+  radial attenuation and RGB intensities from a grey board (the calibration folder's
+  ``calibration.json``), written as a refined geometry file (default ``CALIB/geometry.json``) and
+  a report ``CALIB/calibration-report.json``; ``measure --geometry`` then uses it;
 
 - ``measure SESSION``: every LED frame's pixels onto the mesh (needs the rig's ``geometry.json``
   and the object's mesh; a session from ``abs rig capture --simulate`` carries both) into
@@ -32,6 +38,18 @@ THESIS_TABLE_4_1 = {
 def add_parser(sub) -> None:
     p = sub.add_parser("lightstage", help="light stage: per-point reflectance from a capture session")
     commands = p.add_subparsers(dest="lightstage_command", required=True)
+
+    c = commands.add_parser("calibrate", help="refine the rig geometry file's LEDs from mirror-ball "
+                            "and grey-board frames")
+    c.add_argument("folder", type=Path, help="calibration folder (calibration.json and its frames)")
+    c.add_argument("--geometry", type=Path, required=True, help="the rig's geometry file (as designed)")
+    c.add_argument("--out", type=Path, help="refined geometry file (default FOLDER/geometry.json)")
+    c.add_argument("--sigma-prior-mm", type=float, default=20.0,
+                   help="uncertainty of the geometry file's LED positions, mm (default %(default)s)")
+    c.add_argument("--sigma-direction-rad", type=float, default=None,
+                   help="uncertainty of a highlight line's direction, radians (default: estimated "
+                        "per LED from its lines' scatter)")
+    c.set_defaults(run=run_calibrate)
 
     m = commands.add_parser("measure", help="project every LED frame's pixels onto the mesh")
     m.add_argument("session", type=Path, help="session folder (abs rig capture)")
@@ -76,6 +94,33 @@ def _need(path: Path, step: str) -> Path:
     if not path.exists():
         raise InputError(path, "", f"not found: run 'abs lightstage {step}' first")
     return path
+
+
+def run_calibrate(args) -> int:
+    from abs.lightstage.calibration import calibrate, read_calibration
+    from abs.lightstage.geometry import read_geometry, write_geometry
+
+    for name in ("sigma_prior_mm", "sigma_direction_rad"):
+        if getattr(args, name) is not None and not getattr(args, name) > 0:
+            raise InputError(None, "--" + name.replace("_", "-"), f"must be > 0, got {getattr(args, name)}")
+    geometry = read_geometry(args.geometry)
+    data = read_calibration(args.folder)
+    refined, report = calibrate(geometry, data, args.sigma_prior_mm * 1e-3, args.sigma_direction_rad)
+    out = args.out or args.folder / "geometry.json"
+    write_geometry(refined, out)
+    report = {"geometry_in": str(args.geometry.resolve()), "geometry_out": str(out.resolve()),
+              "ball_frames": len(data.ball_frames), "board_frames": len(data.board_frames), **report}
+    (args.folder / "calibration-report.json").write_text(json.dumps(report, indent=1) + "\n")
+    shifts = [v["shift_mm"] for v in report["leds"].values() if "shift_mm" in v]
+    if shifts:
+        print(f"LED positions: {len(shifts) - len(report['leds_without_highlight'])} refined, median shift "
+              f"{sorted(shifts)[len(shifts) // 2]:.2f} mm")
+    if "attenuation" in report:
+        print(f"attenuation cos^{report['attenuation']['exponent']:.3f} (board up to "
+              f"{report['attenuation']['measured_up_to_deg']:.1f} deg off axis); intensities of "
+              f"{len(report['leds']) - len(report['leds_without_board'])} LEDs")
+    print(f"wrote {out}")
+    return 0
 
 
 def run_measure(args) -> int:

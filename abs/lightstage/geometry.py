@@ -28,7 +28,7 @@ Format ``"abs-lightstage-geometry/1"`` (JSON), world frame of docs/conventions.m
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,7 +38,7 @@ from abs.errors import InputError, read_json
 from abs.lightstage.attenuation import Attenuation
 
 __all__ = ["FORMAT", "Camera", "Led", "RigGeometry", "read_geometry", "write_geometry",
-           "turntable_rotation"]
+           "turntable_rotation", "finite_array"]
 
 FORMAT = "abs-lightstage-geometry/1"
 
@@ -65,6 +65,19 @@ class Camera:
     width: int
     height: int
 
+    def resized(self, width: int, height: int) -> Camera:
+        """This camera taking images of ``width x height`` pixels (the same field of view).
+
+        Calibration frames may be taken at the sensor's full size while a session is binned
+        down: the intrinsics scale by ``s = width / self.width`` about the pixel-centre
+        convention's origin, ``u' = s (u + 0.5) - 0.5``. Raises ValueError if the aspect differs.
+        """
+        s = width / self.width
+        if abs(height / self.height - s) > 1e-9:
+            raise ValueError(f"image {width}x{height} is not a scaled {self.width}x{self.height}")
+        S = np.array([[s, 0.0, 0.5 * s - 0.5], [0.0, s, 0.5 * s - 0.5], [0.0, 0.0, 1.0]])
+        return Camera(S @ self.K, self.R, self.t, width, height)
+
 
 @dataclass(frozen=True)
 class Led:
@@ -90,6 +103,13 @@ class RigGeometry:
         """``(M, c)`` with ``X_world = M (X_object - c) + c`` at turntable angle ``angle_deg``."""
         return turntable_rotation(self.turntable_axis, angle_deg), self.turntable_center
 
+    def with_image_size(self, camera: int, width: int, height: int) -> RigGeometry:
+        """This geometry with camera ``camera`` taking ``width x height`` images
+        (:meth:`Camera.resized`)."""
+        cams = list(self.cameras)
+        cams[camera] = cams[camera].resized(width, height)
+        return replace(self, cameras=tuple(cams))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "format": FORMAT,
@@ -112,7 +132,8 @@ def turntable_rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
     return np.eye(3) + np.sin(a) * kx + (1.0 - np.cos(a)) * kx @ kx
 
 
-def _array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+def finite_array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as finite float64 numbers of ``shape``, else an InputError naming ``source`` and ``name``."""
     try:
         out = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
@@ -123,7 +144,7 @@ def _array(source: Path, name: str, value: Any, shape: tuple[int, ...]) -> np.nd
 
 
 def _unit(source: Path, name: str, value: Any) -> np.ndarray:
-    v = _array(source, name, value, (3,))
+    v = finite_array(source, name, value, (3,))
     norm = np.linalg.norm(v)
     if norm == 0.0:
         raise InputError(source, name, "must not be the zero vector")
@@ -140,9 +161,9 @@ def _attenuation(source: Path, data: Any) -> Attenuation:
             raise InputError(source, "attenuation.exponent", "expected a number >= 0")
         return Attenuation(float(exponent))
     if kind == "table":
-        angles = _array(source, "attenuation.angles_deg", data.get("angles_deg"),
+        angles = finite_array(source, "attenuation.angles_deg", data.get("angles_deg"),
                         (len(data.get("angles_deg") or []),))
-        values = _array(source, "attenuation.values", data.get("values"), angles.shape)
+        values = finite_array(source, "attenuation.values", data.get("values"), angles.shape)
         if angles.size < 2 or np.any(np.diff(angles) <= 0):
             raise InputError(source, "attenuation.angles_deg", "expected at least 2 increasing angles")
         return Attenuation(None, tuple(angles), tuple(values))
@@ -165,9 +186,9 @@ def read_geometry(path: str | Path) -> RigGeometry:
         size = [c.get("width"), c.get("height")]
         if not all(isinstance(s, int) and s > 0 for s in size):
             raise InputError(path, f"cameras[{i}].width", "width and height must be positive integers")
-        cameras.append(Camera(_array(path, f"cameras[{i}].K", c.get("K"), (3, 3)),
-                              _array(path, f"cameras[{i}].R", c.get("R"), (3, 3)),
-                              _array(path, f"cameras[{i}].t", c.get("t"), (3,)), size[0], size[1]))
+        cameras.append(Camera(finite_array(path, f"cameras[{i}].K", c.get("K"), (3, 3)),
+                              finite_array(path, f"cameras[{i}].R", c.get("R"), (3, 3)),
+                              finite_array(path, f"cameras[{i}].t", c.get("t"), (3,)), size[0], size[1]))
     leds_data = data.get("leds")
     if not isinstance(leds_data, dict) or not leds_data:
         raise InputError(path, "leds", "expected a non-empty object of LEDs by name")
@@ -175,8 +196,8 @@ def read_geometry(path: str | Path) -> RigGeometry:
     for name, led in leds_data.items():
         if not isinstance(led, dict):
             raise InputError(path, f"leds.{name}", "expected an object")
-        intensity = _array(path, f"leds.{name}.intensity", led.get("intensity", [1.0, 1.0, 1.0]), (3,))
-        leds[name] = Led(_array(path, f"leds.{name}.position", led.get("position"), (3,)),
+        intensity = finite_array(path, f"leds.{name}.intensity", led.get("intensity", [1.0, 1.0, 1.0]), (3,))
+        leds[name] = Led(finite_array(path, f"leds.{name}.position", led.get("position"), (3,)),
                          _unit(path, f"leds.{name}.axis", led.get("axis")), intensity)
     table = data.get("turntable", {})
     if not isinstance(table, dict):
@@ -186,7 +207,7 @@ def read_geometry(path: str | Path) -> RigGeometry:
         raise InputError(path, "gain", "expected a number > 0")
     return RigGeometry(tuple(cameras), leds,
                        _unit(path, "turntable.axis", table.get("axis", [0.0, 1.0, 0.0])),
-                       _array(path, "turntable.center", table.get("center", [0.0, 0.0, 0.0]), (3,)),
+                       finite_array(path, "turntable.center", table.get("center", [0.0, 0.0, 0.0]), (3,)),
                        _attenuation(path, data.get("attenuation", {"kind": "cos_power", "exponent": 0})),
                        float(gain))
 

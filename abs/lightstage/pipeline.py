@@ -69,12 +69,14 @@ def fit_measurements(meas: Measurements, n_points: int, min_measurements: int = 
 
 def evaluate_held_out(geometry: RigGeometry, tracer: MeshTracer, frames: Iterable[HeldOutFrame],
                       reflectances: dict[str, Reflectance],
-                      on_render: Callable[[int, str, np.ndarray], None] | None = None) -> dict[str, float]:
+                      on_render: Callable[[int, str, np.ndarray], None] | None = None,
+                      select: Callable[[np.ndarray], np.ndarray] | None = None) -> dict[str, float]:
     """Thesis Eq. 4.1 over held-out frames: MAE of pixel values in [0, 1] inside the object mask.
 
-    The mask of a frame is the pixels whose ray hits the mesh. Returns ``{model: MAE}`` pooled over
-    every frame's masked pixels and channels; ``on_render(frame_index, model, image)`` sees each
-    render.
+    The mask of a frame is the pixels whose ray hits the mesh (and, with ``select``, whose hit
+    point, object frame, it accepts: ``select(points) -> (N,) bool``, e.g. one material's region).
+    Returns ``{model: MAE}`` pooled over every frame's masked pixels and channels;
+    ``on_render(frame_index, model, image)`` sees each render.
     """
     sums = {m: 0.0 for m in reflectances}
     count = 0
@@ -83,7 +85,7 @@ def evaluate_held_out(geometry: RigGeometry, tracer: MeshTracer, frames: Iterabl
         if key != (camera, angle):
             view, key = pose_view(geometry, tracer, camera, angle), (camera, angle)
         mask = np.zeros(view.shape[0] * view.shape[1], bool)
-        mask[view.pixel] = True
+        mask[view.pixel if select is None else view.pixel[select(view.hits.point)]] = True
         n = 0
         for m, refl in reflectances.items():
             image = render_view(geometry, tracer, view, light, level, exposure, refl)

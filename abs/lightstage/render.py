@@ -27,7 +27,7 @@ from abs.lightstage.normalise import normalise
 from abs.lightstage.raycast import MeshTracer
 from abs.lightstage.surface import SurfacePoints
 
-__all__ = ["Reflectance", "AnalyticMaterial", "fitted_reflectance", "render_view", "mae"]
+__all__ = ["Reflectance", "AnalyticMaterial", "MeasuredRegions", "fitted_reflectance", "render_view", "mae"]
 
 Reflectance = Callable[[PoseView, np.ndarray], np.ndarray]
 """``reflectance(view, wi)``: ``f_r cos(theta_l)`` (N, 3), 1/sr, at the hits of ``view`` lit from
@@ -52,6 +52,33 @@ class AnalyticMaterial:
     def __call__(self, view: PoseView, wi: np.ndarray) -> np.ndarray:
         iso = normalise(view.hits.normal, wi, view.view)
         return evaluate(self.model, self.params_at(view.hits.point), iso.cos_l, iso.cos_v, iso.cos_h)
+
+
+@dataclass(frozen=True)
+class MeasuredRegions:
+    """An object made of regions of measured (data-driven, isotropic) materials.
+
+    Parameters
+    ----------
+    region_at : callable
+        ``region_at(points)``: (N,) region index at object-frame points (N, 3), metres.
+    brdfs : tuple of callable
+        Per region, ``brdf(theta_h, theta_d, phi_d)``: (N, 3) BRDF in 1/sr at Rusinkiewicz angles
+        (radians), e.g. :func:`abs.brdf.nbrdf.evaluate_nbrdf` bound to one MERL material's network.
+    """
+
+    region_at: Callable[[np.ndarray], np.ndarray]
+    brdfs: tuple[Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray], ...]
+
+    def __call__(self, view: PoseView, wi: np.ndarray) -> np.ndarray:
+        iso = normalise(view.hits.normal, wi, view.view)
+        region = np.asarray(self.region_at(view.hits.point))
+        out = np.zeros((len(region), 3))
+        for r, brdf in enumerate(self.brdfs):
+            sel = region == r
+            if sel.any():
+                out[sel] = brdf(iso.theta_h[sel], iso.theta_d[sel], iso.phi_d[sel])
+        return out * np.clip(iso.cos_l, 0.0, None)[:, None]
 
 
 def fitted_reflectance(fits: ModelFits, model: str, points: SurfacePoints) -> Reflectance:
