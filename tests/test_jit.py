@@ -215,6 +215,7 @@ def test_a_sensor_is_linear_only_at_unit_response_and_without_its_own_gradients(
 
     assert Sensor([0.1, 0.0], [1.0, 1.0, 1.0], [0.01, 0.0, 0.0], np.eye(3).ravel() * 1.1).is_linear()
     assert not Sensor([0.0, 0.0], [1.0, 0.9, 1.0], [0.0] * 3).is_linear()
-    sensor = Sensor([0.0, 0.0], [1.0, 1.0, 1.0], [0.0] * 3)
-    dr.enable_grad(sensor.vignetting)
-    assert not sensor.is_linear()
+    for field in ("vignetting", "stray_light", "colour_matrix", "intrinsics_offset"):
+        sensor = Sensor([0.0, 0.0], [1.0, 1.0, 1.0], [0.0] * 3)
+        dr.enable_grad(getattr(sensor, field))
+        assert not sensor.is_linear(), field

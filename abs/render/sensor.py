@@ -133,7 +133,8 @@ class Sensor:
         in every channel and no sensor parameter has gradients enabled. The adjoint of
         :meth:`apply` is then the same at every image (what lets a batched gradient skip
         rendering the whole image first, :meth:`CompiledScene.render_backward`)."""
-        arrays = (self.vignetting, self.response, self.stray_light, self.colour_matrix)
+        arrays = (self.vignetting, self.response, self.stray_light, self.colour_matrix,
+                  self.intrinsics_offset)
         if any(dr.grad_enabled(a) for a in arrays):
             return False
         return bool(np.all(self.response.numpy() == 1.0))
