@@ -139,12 +139,17 @@ def test_brdf_pca_renders_reuse_kernels(silhouette_scene_dir, tmp_path):
     assert first and second <= first, f"{len(second - first)} kernels compiled anew"
 
 
+def _small_view(scene_dir):
+    """The small glass scene compiled, and a 16x12 view of it."""
+    compiled = compile_scene(load_scene(scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    return compiled, Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
+
+
 def test_derivative_renders_bound_the_samples_in_flight(small_scene_dir, monkeypatch):
     """Forward mode and path replay keep no recorded graph: their memory is the path loop's state
     for the samples in flight, which CompiledScene bounds whatever the spp."""
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
+    compiled, camera = _small_view(small_scene_dir)
     cap = 16 * 12 * 2
     monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", str(cap))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -181,9 +186,7 @@ def test_batched_gradient_with_a_linear_sensor_renders_no_extra_image(small_scen
     batch."""
     import abs.render.sensor as sensor_module
 
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(16, 12, np.radians(30)), R, t, 16, 12)
+    compiled, camera = _small_view(small_scene_dir)
     monkeypatch.setenv("ABS_SAMPLES_IN_FLIGHT", str(16 * 12 * 2))  # 2 spp per batch
     weight = np.random.default_rng(3).uniform(-1.0, 1.0, (12, 16, 3))
     names = ["glass.absorption", "environment.scale"]
