@@ -104,18 +104,20 @@ class FitProblem:
 
     @property
     def recorded_material(self) -> str | None:
-        """The glass whose path lengths recordings keep: the owner of the fitted absorption
-        (``None`` when no absorption is fitted)."""
+        """The glass whose path lengths recordings keep: the owner of the fitted absorption, the
+        first by name when several glasses' absorptions are fitted (the others then change the
+        paths' weights in ways one length cannot reweight, and are rendered like an IOR); ``None``
+        when no absorption is fitted."""
         owners = self._absorption_owners()
         return owners[0] if owners else None
 
     @property
     def reweightable(self) -> list[str]:
-        """The fitted parameters whose values a path-length recording gives without a render (an
-        absorption of one glass material, the environment's scale, a sensor parameter), in the
-        vector's order; empty when recordings are off or several glasses' absorptions are fitted.
-        Renders are recordings whenever this is not empty."""
-        if not self.reweight or len(self._absorption_owners()) > 1:
+        """The fitted parameters whose values a path-length recording gives without a render (the
+        absorption of :attr:`recorded_material`, the environment's scale, a sensor parameter), in
+        the vector's order; empty when recordings are off. Renders are recordings whenever this
+        is not empty."""
+        if not self.reweight:
             return []
         others = set(self.compiled.needs_render(self.vector.names, self.recorded_material))
         return [n for n in self.vector.names if n not in others]
