@@ -637,6 +637,50 @@ def part_end_to_end_superpixel() -> dict:
     return out
 
 
+def part_end_to_end_blur() -> dict:
+    """``end_to_end`` with the capture's processing blur modelled (``blur_px`` in
+    ``cameras.json``, written by ``build_capture`` since it measures its demosaicing and
+    undistortion's blur; the fit's sensor blurs its renderings alike), in one run beside its
+    references: the simulated capture at downsample 1 and 2, the bilinear build at downsample 1
+    and 2, the same bilinear build with ``blur_px`` removed (the renderer draws it sharp, as
+    before the blur was modelled), and the superpixel build. The same raw brackets (noise seed 3)
+    and start as ``end_to_end``, fitted at 128 samples per pixel instead of 32: today's fits of
+    absorption and scale reweight one path-length recording per view instead of rendering at
+    every step (issue 31), so the fit's samples are the recording's, and at 32 the simulated
+    capture's green absorption is not measured (the fit says so: standard error 1e4)."""
+    from abs.acquisition.build import build_capture
+    from abs.io.capture import load_capture, save_capture
+    from abs.simulate import simulate_capture
+
+    t0 = time.perf_counter()
+    cfg = {**E2E, "fit_spp": 128}
+    scene_path, scene, compiled, views, truth = _e2e_setup()
+    W, H = cfg["width"], cfg["height"]
+    gain = cfg["gain_dn_per_s"]
+    out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=W, height=H,
+                         spp=cfg["truth_spp"], shot_noise=1e-4, read_noise=0.003, seed=2)
+        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
+        bilinear, _ = build_capture(raw / "build.json", tmp / "bilinear")
+        superpixel, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+        save_capture(tmp / "unblurred", load_capture(tmp / "bilinear").views, blur_px=[0, 0, 0])
+        out["blur_px"] = {"bilinear": list(bilinear.views[0].blur_px),
+                          "superpixel": list(superpixel.views[0].blur_px)}
+        print("blur_px", out["blur_px"], flush=True)
+        runs = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
+                ("built_from_raw", "bilinear", gain, 1),
+                ("built_from_raw_downsample2", "bilinear", gain, 2),
+                ("built_from_raw_unblurred", "unblurred", gain, 1),
+                ("built_from_raw_superpixel", "superpixel", gain, 1))
+        for label, folder, unit, ds in runs:
+            out[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
+            print(label, np.round(out[label]["glass_absorption_error"], 2), flush=True)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
 #: Sensor-noise seeds of ``end_to_end_replicates`` (``end_to_end`` itself uses 3).
 E2E_REPLICATE_SEEDS = (11, 12, 13)
 
@@ -646,22 +690,42 @@ def part_end_to_end_replicates() -> dict:
     seeds, the same renders, settings and start: for each seed the simulated capture at
     downsample 1 and 2, the bilinear build at downsample 1 and 2 and the superpixel build at
     downsample 1. Per variant: each replicate's errors and their mean and standard deviation
-    across replicates (run-to-run spread, to set beside the fits' Laplace standard errors)."""
+    across replicates (run-to-run spread, to set beside the fits' Laplace standard errors).
+    Measured before builds wrote ``blur_px``: rerunning it now fits blurred renderings."""
+    gain = E2E["gain_dn_per_s"]
+    return _replicates(E2E, (("simulate", "simulated", 1.0, 1),
+                             ("simulate_downsample2", "simulated", 1.0, 2),
+                             ("built_from_raw", "bilinear", gain, 1),
+                             ("built_from_raw_downsample2", "bilinear", gain, 2),
+                             ("built_from_raw_superpixel", "superpixel", gain, 1)))
+
+
+def part_end_to_end_blur_replicates() -> dict:
+    """``end_to_end_blur``'s comparison (128 samples per pixel) repeated with the replicate
+    seeds: the simulated capture, the bilinear build with its ``blur_px`` and without it, and
+    the superpixel build, all at downsample 1."""
+    gain = E2E["gain_dn_per_s"]
+    return _replicates({**E2E, "fit_spp": 128},
+                       (("simulate", "simulated", 1.0, 1), ("built_from_raw", "bilinear", gain, 1),
+                        ("built_from_raw_unblurred", "unblurred", gain, 1),
+                        ("built_from_raw_superpixel", "superpixel", gain, 1)))
+
+
+def _replicates(cfg: dict, variants) -> dict:
+    """Fits of ``variants`` (label, capture folder, unit, downsample) for each replicate seed;
+    each seed's captures: ``simulated``, the ``bilinear`` and ``superpixel`` builds of its raw
+    brackets, and ``unblurred`` (the bilinear build without ``blur_px``)."""
     from abs.acquisition.build import build_capture
+    from abs.io.capture import load_capture, save_capture
     from abs.simulate import simulate_capture
 
     t0 = time.perf_counter()
-    cfg = E2E
     scene_path, scene, compiled, views, truth = _e2e_setup()
     W, H = cfg["width"], cfg["height"]
-    gain = cfg["gain_dn_per_s"]
-    variants = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
-                ("built_from_raw", "bilinear", gain, 1),
-                ("built_from_raw_downsample2", "bilinear", gain, 2),
-                ("built_from_raw_superpixel", "superpixel", gain, 1))
-    out: dict = {"config": "as end_to_end; sensor-noise seeds " + ", ".join(
-        map(str, E2E_REPLICATE_SEEDS)) + " (raw), the same seeds for abs simulate",
-        "truth": truth, "replicates": {}}
+    out: dict = {"config": f"as end_to_end, fit_spp {cfg['fit_spp']}; sensor-noise seeds "
+                           + ", ".join(map(str, E2E_REPLICATE_SEEDS))
+                           + " (raw), the same seeds for abs simulate",
+                 "truth": truth, "replicates": {}}
     for seed in E2E_REPLICATE_SEEDS:
         rep: dict = {}
         with tempfile.TemporaryDirectory() as tmp:
@@ -671,6 +735,8 @@ def part_end_to_end_replicates() -> dict:
             raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=seed)
             build_capture(raw / "build.json", tmp / "bilinear")
             build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+            save_capture(tmp / "unblurred", load_capture(tmp / "bilinear").views,
+                         blur_px=[0, 0, 0])
             for label, folder, unit, ds in variants:
                 rep[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
                 print(seed, label, np.round(rep[label]["glass_absorption_error"], 2),
@@ -697,7 +763,9 @@ def part_end_to_end_exr() -> dict:
     """``end_to_end``'s built capture without the mosaic: the same distorted renders written as
     one linear EXR frame per view (noise as ``abs simulate``'s), undistorted by ``build_capture``
     and fitted at downsample 1. Separates the demosaic's share of the absorption bias from the
-    resampling's (distortion simulated at 2x, then undistortion)."""
+    resampling's (distortion simulated at 2x, then undistortion). The build writes the
+    undistortion's own blur (``blur_px``, no demosaic); fitted at 128 samples per pixel as
+    ``end_to_end_blur``."""
     from abs.acquisition.build import build_capture
     from abs.acquisition.camera_file import CameraModel, write_camera_file
     from abs.fitting import FitSettings, fit
@@ -706,14 +774,14 @@ def part_end_to_end_exr() -> dict:
     from abs.simulate import add_sensor_noise
 
     t0 = time.perf_counter()
-    cfg = E2E
+    cfg = {**E2E, "fit_spp": 128}
     scene_path, _, compiled, views, _ = _e2e_setup()
     W, H, n = cfg["width"], cfg["height"], cfg["supersample"]
     dist = np.array(cfg["distortion"])
     truth_abs = compiled.get("glass.absorption").copy()
     rng = np.random.default_rng(3)
-    out: dict = {"config": "as end_to_end; frames: one linear EXR per view, noise shot 1e-4, "
-                           "read 0.003 (abs simulate's)"}
+    out: dict = {"config": "as end_to_end, fit_spp 128; frames: one linear EXR per view, noise "
+                           "shot 1e-4, read 0.003 (abs simulate's)"}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         cams, build_views = {}, []
@@ -732,7 +800,8 @@ def part_end_to_end_exr() -> dict:
         write_camera_file(tmp / "cameras.json", cams)
         (tmp / "build.json").write_text(json.dumps({"cameras": "cameras.json",
                                                     "views": build_views}))
-        build_capture(tmp / "build.json", tmp / "built")
+        built, _ = build_capture(tmp / "build.json", tmp / "built")
+        out["blur_px"] = list(built.views[0].blur_px)
         settings = FitSettings(spp=cfg["fit_spp"], max_iterations=cfg["max_iterations"],
                                refinement_steps=cfg["refinement_steps"])
         initial = {"environment.scale": [cfg["start_scale_factor"]],
@@ -829,7 +898,9 @@ PARTS = {"real_stereo": part_real_stereo, "real_hdr": part_real_hdr,
          "synthetic_hdr": part_synthetic_hdr, "end_to_end": part_end_to_end,
          "pipeline_contrast": part_pipeline_contrast, "end_to_end_exr": part_end_to_end_exr,
          "end_to_end_superpixel": part_end_to_end_superpixel,
-         "end_to_end_replicates": part_end_to_end_replicates}
+         "end_to_end_replicates": part_end_to_end_replicates,
+         "end_to_end_blur": part_end_to_end_blur,
+         "end_to_end_blur_replicates": part_end_to_end_blur_replicates}
 
 
 def _f(v, fmt="{:.3f}") -> str:
@@ -922,19 +993,42 @@ def write_markdown(results: dict, path: Path) -> None:
                                 zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
                     + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
                     f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f}{note} |")
-    rp = parts.get("end_to_end_replicates")
-    if rp:
+    eb = parts.get("end_to_end_blur")
+    if eb:
+        notes = {"built_from_raw_unblurred": "the same build, blur_px removed",
+                 "built_from_raw_superpixel": "64x48 capture, fitted at downsample 1"}
+        for label in ("simulate", "built_from_raw", "built_from_raw_unblurred",
+                      "simulate_downsample2", "built_from_raw_downsample2",
+                      "built_from_raw_superpixel"):
+            x = eb[label]
+            lines.append(
+                f"| {'end to end, capture blur modelled (one run)' if label == 'simulate' else ''} "
+                f"| {label}: environment.scale error; glass.absorption error (1/m) | "
+                f"{100 * x['environment_scale_rel_error']:+.2f} % "
+                f"(± {100 * x['environment_scale_stderr']:.2f} %); "
+                + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
+                            zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
+                + f" | {notes.get(label, '')} |")
+        lines.append("| | blur_px written by the builds (R, G, B) | bilinear "
+                     + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["bilinear"]) + "; superpixel "
+                     + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["superpixel"]) + " | |")
+    for part, heading in (("end_to_end_replicates", "same, {n} more noise seeds"),
+                          ("end_to_end_blur_replicates",
+                           "capture blur modelled, {n} more noise seeds")):
+        rp = parts.get(part)
+        if not rp:
+            continue
         n_rep = len(rp["replicates"])
         for label, x in rp["summary"].items():
             lines.append(
-                f"| {'same, ' + str(n_rep) + ' more noise seeds' if label == 'simulate' else ''} "
-                f"| {label}: environment.scale error; glass.absorption error (1/m), mean ± "
-                f"spread (sd) over the seeds | {100 * x['environment_scale_rel_error_mean']:+.2f} % "
-                f"(± {100 * x['environment_scale_rel_error_sd']:.2f} %); "
-                + ", ".join(f"{v:+.2f} ± {sd:.2f}" for v, sd in
-                            zip(x["glass_absorption_error_mean"], x["glass_absorption_error_sd"]))
-                + " | fits' own standard errors: "
-                + ", ".join(f"{v:.2f}" for v in x["glass_absorption_stderr_mean"]) + " |")
+                f"| {heading.format(n=n_rep) if label == 'simulate' else ''} "
+                    f"| {label}: environment.scale error; glass.absorption error (1/m), mean ± "
+                    f"spread (sd) over the seeds | {100 * x['environment_scale_rel_error_mean']:+.2f} % "
+                    f"(± {100 * x['environment_scale_rel_error_sd']:.2f} %); "
+                    + ", ".join(f"{v:+.2f} ± {sd:.2f}" for v, sd in
+                                zip(x["glass_absorption_error_mean"], x["glass_absorption_error_sd"]))
+                    + " | fits' own standard errors: "
+                    + ", ".join(f"{v:.2f}" for v in x["glass_absorption_stderr_mean"]) + " |")
     ex = parts.get("end_to_end_exr")
     if ex:
         lines.append(
@@ -943,7 +1037,9 @@ def write_markdown(results: dict, path: Path) -> None:
             f"{100 * (ex['environment_scale'] - 1):+.2f} % (± {100 * ex['environment_scale_stderr']:.2f} %); "
             + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
                         zip(ex["glass_absorption_error"], ex["glass_absorption_stderr"]))
-            + " | isolates the resampling's share |")
+            + " | isolates the resampling's share"
+            + (f"; blur_px {ex['blur_px'][0]:.3f} modelled, 128 spp |" if "blur_px" in ex
+               else " |"))
     pc = parts.get("pipeline_contrast")
     if pc:
         for period, kept in pc["contrast_kept"].items():

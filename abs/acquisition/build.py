@@ -22,6 +22,9 @@ camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture
 (optional): an image of the photographs' size, drawn on the *original* (distorted) frames,
 nonzero where pixels are compared; it is undistorted with the image (nearest neighbour, and
 pixels that fall outside the original frame are left out) and written as the view's mask.
+The capture's ``blur_px`` is the blur that this demosaicing and undistortion add
+(:func:`abs.acquisition.blur.processing_blur`, averaged over the views' cameras), so that fits
+blur their renderings alike.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from abs.acquisition.blur import processing_blur
 from abs.acquisition.camera_file import read_camera_file
 from abs.acquisition.demosaic import (DEMOSAIC_METHODS, cfa_masks, demosaic_bilinear,
                                       demosaic_superpixel, superpixel_any, superpixel_mask)
@@ -171,7 +175,7 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                           f"{', '.join(DEMOSAIC_METHODS)}, got "
                                                           f"{demosaic!r}")
     superpixel = demosaic == "superpixel"
-    views, images, masks, merges = [], {}, {}, {}
+    views, images, masks, merges, blurs = [], {}, {}, {}, {}
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
         if not isinstance(entry, dict):
@@ -198,6 +202,11 @@ def build_capture(build_file: str | Path, out: str | Path,
         # The camera of the merged image: the calibrated one, or at superpixel resolution.
         cam_img = superpixel_camera(cam) if superpixel else cam
         K_new = pinhole_K(cam_img)
+        # Linear EXR frames are RGB already: only undistortion blurs them.
+        raw = any(Path(f).suffix.lower() != ".exr" for f in entry["frames"])
+        key = (entry["camera"], raw)
+        if key not in blurs:
+            blurs[key] = processing_blur(cam, K_new, demosaic if raw else None, cfa or "RGGB")
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
@@ -209,4 +218,5 @@ def build_capture(build_file: str | Path, out: str | Path,
         merges[entry["name"]] = merged
         if progress is not None:
             progress(1)
-    return save_capture(out, views, images, masks or None), merges
+    blur_px = np.mean(list(blurs.values()), axis=0) if blurs else np.zeros(3)
+    return save_capture(out, views, images, masks or None, blur_px=blur_px), merges

@@ -20,7 +20,7 @@ import numpy as np
 
 from abs.errors import InputError
 
-__all__ = ["CFA_PATTERNS", "DEMOSAIC_METHODS", "cfa_masks", "demosaic_bilinear",
+__all__ = ["CFA_PATTERNS", "DEMOSAIC_METHODS", "cfa_masks", "demosaic", "demosaic_bilinear",
            "demosaic_superpixel", "superpixel_any", "superpixel_K", "superpixel_mask"]
 
 #: Bayer patterns by the colours of the top-left 2x2 block, row-major.
@@ -71,7 +71,7 @@ def _cells(array: np.ndarray, pattern: str) -> dict[str, list[np.ndarray]]:
     return planes
 
 
-def demosaic_superpixel(mosaic: np.ndarray, pattern: str) -> np.ndarray:
+def demosaic_superpixel(mosaic: np.ndarray, pattern: str, dtype=np.float32) -> np.ndarray:
     """Superpixel demosaicing: one RGB pixel per 2x2 CFA cell, no interpolation.
 
     Parameters
@@ -80,16 +80,18 @@ def demosaic_superpixel(mosaic: np.ndarray, pattern: str) -> np.ndarray:
         ``(H, W)`` linear sensor values, H and W even.
     pattern : str
         Bayer pattern of the top-left 2x2 block: ``RGGB``, ``BGGR``, ``GRBG`` or ``GBRG``.
+    dtype : numpy dtype
+        Of the result (float64 for exact moments, :mod:`.blur`).
 
     Returns
     -------
     np.ndarray
-        ``(H/2, W/2, 3)`` float32: R and B the cell's red and blue sites, G the mean of its two
+        ``(H/2, W/2, 3)``: R and B the cell's red and blue sites, G the mean of its two
         green sites. Pixel (i, j) is centred on the cell's centre (:data:`SUPERPIXEL_FROM_FULL`);
         the red and blue sites themselves lie a quarter superpixel off it, diagonally.
     """
     planes = _cells(np.asarray(mosaic, np.float64), pattern)
-    return np.stack([sum(planes[c]) / len(planes[c]) for c in "RGB"], axis=-1).astype(np.float32)
+    return np.stack([sum(planes[c]) / len(planes[c]) for c in "RGB"], axis=-1).astype(dtype)
 
 
 def superpixel_any(flags: np.ndarray, pattern: str) -> np.ndarray:
@@ -122,7 +124,7 @@ def superpixel_K(K: np.ndarray) -> np.ndarray:
     return SUPERPIXEL_FROM_FULL @ np.asarray(K, np.float64)
 
 
-def demosaic_bilinear(mosaic: np.ndarray, pattern: str) -> np.ndarray:
+def demosaic_bilinear(mosaic: np.ndarray, pattern: str, dtype=np.float32) -> np.ndarray:
     """Bilinear demosaicing.
 
     Parameters
@@ -131,11 +133,13 @@ def demosaic_bilinear(mosaic: np.ndarray, pattern: str) -> np.ndarray:
         ``(H, W)`` linear sensor values (any unit; dark-subtracted or not).
     pattern : str
         Bayer pattern of the top-left 2x2 block: ``RGGB``, ``BGGR``, ``GRBG`` or ``GBRG``.
+    dtype : numpy dtype
+        Of the result (float64 for exact moments, :mod:`.blur`).
 
     Returns
     -------
     np.ndarray
-        ``(H, W, 3)`` float32 R, G, B in the mosaic's unit.
+        ``(H, W, 3)`` R, G, B in the mosaic's unit.
     """
     mosaic = np.asarray(mosaic, np.float64)
     if mosaic.ndim != 2:
@@ -144,4 +148,15 @@ def demosaic_bilinear(mosaic: np.ndarray, pattern: str) -> np.ndarray:
     masks = cfa_masks(mosaic.shape, pattern)
     planes = [cv2.filter2D(mosaic * masks[..., c], -1, kernel, borderType=cv2.BORDER_REFLECT)
               for c, kernel in enumerate((_RED_BLUE_KERNEL, _GREEN_KERNEL, _RED_BLUE_KERNEL))]
-    return np.stack(planes, axis=-1).astype(np.float32)
+    return np.stack(planes, axis=-1).astype(dtype)
+
+
+def demosaic(mosaic: np.ndarray, pattern: str, method: str = DEMOSAIC_METHODS[0],
+             dtype=np.float32) -> np.ndarray:
+    """Demosaic ``mosaic`` by ``method`` (one of :data:`DEMOSAIC_METHODS`): the functions above
+    by name."""
+    methods = {"bilinear": demosaic_bilinear, "superpixel": demosaic_superpixel}
+    if method not in methods:
+        raise InputError(None, "demosaic", f"expected one of {', '.join(DEMOSAIC_METHODS)}, got "
+                                           f"{method!r}")
+    return methods[method](mosaic, pattern, dtype)

@@ -18,7 +18,7 @@ from abs.acquisition.camera_file import CameraModel
 from abs.acquisition.demosaic import superpixel_K
 from abs.errors import InputError
 
-__all__ = ["pinhole_K", "superpixel_camera", "undistort_image", "undistort_mask"]
+__all__ = ["pinhole_K", "superpixel_camera", "undistort_image", "undistort_mask", "undistortion_maps"]
 
 
 def superpixel_camera(camera: CameraModel) -> CameraModel:
@@ -50,14 +50,22 @@ def pinhole_K(camera: CameraModel, alpha: float = 0.0) -> np.ndarray:
     return np.asarray(K_new, np.float64)
 
 
-def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> np.ndarray:
-    """Resample ``image`` (H, W[, C], float) as seen by the pinhole ``K_new`` (bilinear)."""
+def undistortion_maps(camera: CameraModel, K_new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of the undistorted image (pinhole ``K_new``, the camera's size), the position
+    ``(x, y)`` in the distorted image that it samples: two ``(H, W)`` float32 arrays, pixels."""
+    return cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
+                                       (camera.width, camera.height), cv2.CV_32FC1)
+
+
+def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray,
+                    dtype=np.float32) -> np.ndarray:
+    """Resample ``image`` (H, W[, C], float) as seen by the pinhole ``K_new`` (bilinear), as
+    ``dtype`` (float64 for exact moments, :mod:`.blur`)."""
     if image.shape[:2] != (camera.height, camera.width):
         raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, camera "
                          f"{camera.width}x{camera.height}")
-    map1, map2 = cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
-                                             (camera.width, camera.height), cv2.CV_32FC1)
-    return cv2.remap(np.asarray(image, np.float32), map1, map2, cv2.INTER_LINEAR,
+    map1, map2 = undistortion_maps(camera, K_new)
+    return cv2.remap(np.asarray(image, dtype), map1, map2, cv2.INTER_LINEAR,
                      borderMode=cv2.BORDER_CONSTANT)
 
 
@@ -67,8 +75,7 @@ def undistort_mask(mask: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> 
     if mask.shape[:2] != (camera.height, camera.width):
         raise ValueError(f"mask is {mask.shape[1]}x{mask.shape[0]}, camera "
                          f"{camera.width}x{camera.height}")
-    map1, map2 = cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
-                                             (camera.width, camera.height), cv2.CV_32FC1)
+    map1, map2 = undistortion_maps(camera, K_new)
     out = cv2.remap(np.asarray(mask, bool).astype(np.uint8), map1, map2, cv2.INTER_NEAREST,
                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     return out.astype(bool)

@@ -47,5 +47,8 @@ def run(args) -> int:
         if args.report:
             args.report.mkdir(parents=True, exist_ok=True)
             write_weight_png(args.report / f"{name}_weight.png", merged.weight)
+    blur = capture.views[0].blur_px
+    print(f"processing blur (blur_px, fits blur their renderings alike): R {blur[0]:.2f}, "
+          f"G {blur[1]:.2f}, B {blur[2]:.2f} px")
     print(f"wrote {len(capture.views)} views to {args.out}")
     return 0

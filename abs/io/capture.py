@@ -5,7 +5,8 @@ A capture folder holds ``cameras.json`` next to the photographs::
     {"views": [{"name": "v0", "image": "v0.exr",
                 "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
                 "R": [[...], [...], [...]], "t": [tx, ty, tz],
-                "holdout": false, "mask": "v0_mask.png"}]}
+                "holdout": false, "mask": "v0_mask.png"}],
+     "blur_px": [0.8, 0.65, 0.8]}
 
 - ``name``: unique, usable as a file name (letters, digits, ``_``, ``-``, ``.``; not starting
   with ``.`` or ``-``; at most 128 characters).
@@ -15,6 +16,11 @@ A capture folder holds ``cameras.json`` next to the photographs::
   ``x_cam = R @ X_world + t``. ``K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`` with fx, fy > 0.
 - ``holdout`` (optional, default false): the view is kept out of fitting, for validation.
 - ``mask`` (optional): image of the photograph's size whose nonzero pixels are compared.
+- ``blur_px`` (optional, top level, default ``[0, 0, 0]``): per R, G, B, the standard deviation
+  in pixels of a Gaussian blur that the photographs' processing added beyond each pixel's own
+  footprint, in every view (``abs capture build`` writes its demosaicing and undistortion's,
+  docs/acquisition.md). Renderings are blurred alike before they are compared. Readers that
+  ignore it (unknown top-level keys are ignored) compare unblurred renderings, as before.
 
 Keys of a view starting with ``_`` are comments and ignored; other unknown keys are errors, so a
 typo such as ``holdOut`` cannot silently change meaning. Unknown top-level keys are ignored.
@@ -111,6 +117,15 @@ def _check_holdout(value: Any, source: Path | None, field: str) -> bool:
     return value
 
 
+def _check_blur(value: Any, source: Path | None, field: str) -> tuple[float, float, float]:
+    # Beyond 10 pixels a "processing blur" is a mistake (pixels, not micrometres?), not a blur.
+    blur = _matrix(value, (3,), source, field)
+    if np.any(blur < 0) or np.any(blur > 10):
+        raise CaptureError(source, field, f"expected 3 standard deviations in [0, 10] pixels "
+                                          f"(R, G, B), got {blur.tolist()}")
+    return tuple(float(b) for b in blur)
+
+
 def _read_only(arr: np.ndarray) -> np.ndarray:
     arr = np.array(arr, dtype=np.float64)
     arr.setflags(write=False)
@@ -143,6 +158,9 @@ class View:
         Kept out of fitting (validation view).
     mask : Path or None
         Absolute path of the comparison mask (nonzero = compared), or ``None`` for all pixels.
+    blur_px : tuple of 3 float
+        The photograph's processing blur per R, G, B (Gaussian standard deviation, pixels; the
+        capture file's top-level ``blur_px``).
     """
 
     name: str
@@ -154,10 +172,12 @@ class View:
     height: int
     holdout: bool = False
     mask: Path | None = None
+    blur_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         where = f"View({self.name!r})"
         _check_name(self.name, None, f"{where}.name")
+        object.__setattr__(self, "blur_px", _check_blur(self.blur_px, None, f"{where}.blur_px"))
         object.__setattr__(self, "image", Path(self.image))
         object.__setattr__(self, "K", _read_only(_check_K(self.K, None, f"{where}.K")))
         object.__setattr__(self, "R", _read_only(_check_R(self.R, None, f"{where}.R")))
@@ -252,7 +272,8 @@ def _image_size(path: Path, source: Path, field: str,
         raise CaptureError(source, field, f"{path}: {exc.message}") from exc
 
 
-def _parse_view(entry: Any, index: int, folder: Path, source: Path) -> View:
+def _parse_view(entry: Any, index: int, folder: Path, source: Path,
+                blur_px: tuple[float, float, float]) -> View:
     field = f"views[{index}]"
     if not isinstance(entry, dict):
         raise CaptureError(source, field, f"expected an object, got {type(entry).__name__}")
@@ -279,7 +300,7 @@ def _parse_view(entry: Any, index: int, folder: Path, source: Path) -> View:
             raise CaptureError(source, f"{field}.mask", f"mask is {mask_size[0]}x{mask_size[1]} "
                                                         f"pixels, photograph {width}x{height}")
     return View(name=name, image=image.absolute(), K=K, R=R, t=t, width=width, height=height,
-                holdout=holdout, mask=None if mask is None else mask.absolute())
+                holdout=holdout, mask=None if mask is None else mask.absolute(), blur_px=blur_px)
 
 
 def load_capture(folder: str | Path) -> Capture:
@@ -316,10 +337,11 @@ def load_capture(folder: str | Path) -> Capture:
     views = data.get("views")
     if not isinstance(views, list) or not views:
         raise CaptureError(source, "views", f"expected a non-empty list of views, got {views!r}")
+    blur_px = _check_blur(data.get("blur_px", [0.0, 0.0, 0.0]), source, "blur_px")
     parsed: list[View] = []
     seen: dict[str, int] = {}
     for i, entry in enumerate(views):
-        view = _parse_view(entry, i, folder, source)
+        view = _parse_view(entry, i, folder, source, blur_px)
         if view.name in seen:
             raise CaptureError(source, f"views[{i}].name", f"duplicate name {view.name!r} "
                                                            f"(also views[{seen[view.name]}])")
@@ -359,7 +381,8 @@ def _json_view(view: View, folder: Path) -> str:
 
 def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                  images: Mapping[str, np.ndarray] | None = None,
-                 masks: Mapping[str, np.ndarray] | None = None) -> Capture:
+                 masks: Mapping[str, np.ndarray] | None = None,
+                 blur_px: Sequence[float] | None = None) -> Capture:
     """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks and
     ``cameras.json`` (written last, atomically), then load it back.
 
@@ -376,6 +399,9 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     masks : mapping of str to np.ndarray, optional
         ``(height, width)`` masks (nonzero = compared) per view name. A :class:`View` missing
         here keeps its existing mask, if any.
+    blur_px : sequence of 3 float, optional
+        The photographs' processing blur per R, G, B (pixels; top-level ``blur_px``). Default:
+        that of the :class:`View` items (which must agree), zeros when all are mappings.
 
     Returns
     -------
@@ -393,6 +419,13 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     masks = dict(masks or {})
     if not views:
         raise CaptureError(None, "views", "expected at least one view")
+    if blur_px is None:
+        blurs = {v.blur_px for v in views if isinstance(v, View)}
+        if len(blurs) > 1:
+            raise CaptureError(None, "blur_px", f"the views' blurs differ ({sorted(blurs)}); a "
+                                                "capture has one: give blur_px")
+        blur_px = blurs.pop() if blurs else (0.0, 0.0, 0.0)
+    blur_px = _check_blur(blur_px, None, "blur_px")
 
     # Validate everything before writing anything.
     prepared: list[tuple[dict[str, Any], np.ndarray, np.ndarray | None]] = []
@@ -465,7 +498,11 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
         saved.append(View(image=image_path, width=rgb.shape[1], height=rgb.shape[0],
                           mask=mask_path, **spec))
 
-    text = '{\n  "views": [\n' + ",\n".join(_json_view(v, folder) for v in saved) + "\n  ]\n}\n"
+    text = '{\n  "views": [\n' + ",\n".join(_json_view(v, folder) for v in saved) + "\n  ]"
+    if any(blur_px):
+        # Only when there is a blur: captures without one stay as every reader knows them.
+        text += f',\n  "blur_px": {json.dumps(list(blur_px))}'
+    text += "\n}\n"
     tmp = folder / f".{CAMERAS_FILE}.tmp"
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, folder / CAMERAS_FILE)

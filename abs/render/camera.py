@@ -35,6 +35,12 @@ class Camera:
     block : int
         Each pixel is the average of ``block`` x ``block`` pixels of a finer image (a camera
         downsampled for comparison with box-averaged photographs); 1 for an ordinary camera.
+    blur_px : tuple of 3 float
+        Standard deviation of a Gaussian point-spread function per R, G, B, in pixels of the
+        full-resolution photographs (``block = 1``): the blur that the photographs' processing
+        added beyond a pixel's own footprint (demosaicing, resampling; capture files'
+        ``blur_px``, :mod:`abs.io.capture`). Applied by the sensor
+        (:meth:`abs.render.sensor.Sensor.apply`); zeros for none.
     """
 
     K: np.ndarray
@@ -43,12 +49,13 @@ class Camera:
     width: int
     height: int
     block: int = 1
+    blur_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @classmethod
     def from_view(cls, view) -> "Camera":
-        """From a :class:`abs.io.capture.View`."""
+        """From a :class:`abs.io.capture.View` (its photograph's blur included)."""
         return cls(np.asarray(view.K, float), np.asarray(view.R, float), np.asarray(view.t, float),
-                   int(view.width), int(view.height))
+                   int(view.width), int(view.height), 1, tuple(float(s) for s in view.blur_px))
 
     @property
     def center(self) -> np.ndarray:

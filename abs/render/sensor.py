@@ -1,5 +1,5 @@
 """The camera sensor applied to rendered radiance: an error of the camera matrix, vignetting,
-stray light, a colour matrix and a non-linear response.
+stray light, a colour matrix, the blur of the photographs' processing and a non-linear response.
 
 Applied to every rendering after the path tracer (in :meth:`CompiledScene.render`), in Dr.Jit, so
 images stay differentiable with respect to the sensor's parameters and to everything upstream.
@@ -7,9 +7,11 @@ The order follows the light: the photographs' camera matrix differs from the cal
 (``intrinsics_offset``: the image lands shifted and scaled on the sensor), the lens attenuates
 the image towards its corners (vignetting), light scattered inside the lens adds a veil (stray
 light), the sensor's colour filters mix the channels of what reaches it (colour matrix), then the
-sensor converts each channel's irradiance to values (response)::
+photographs' processing blurs each channel (demosaicing and resampling in a capture build:
+``camera.blur_px``, not a fitted parameter), and the sensor converts each channel's irradiance to
+values (response)::
 
-    out_c = (sum_j M_cj (V(r) L'_j + s_j)) ** gamma_c,     V(r) = 1 + k1 r^2 + k2 r^4,
+    out_c = (G_c * sum_j M_cj (V(r) L'_j + s_j)) ** gamma_c,     V(r) = 1 + k1 r^2 + k2 r^4,
     L'(u) = L(u + d(u)),     d(u) = -(dc + e (u - c)) / (1 + e),     e = df / f
 
 with ``r`` the distance of the point on the image plane from the principal point in units of the
@@ -23,6 +25,9 @@ for a common small rotation of the cameras; a translation (parallax) is not an i
 not modelled. The colour matrix sits **before** the response: a camera mixes colours in its
 linear signal (filter cross-talk, white balance, its colour-correction matrix), and any tone
 curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
+``G_c *`` is a convolution with a Gaussian of standard deviation ``blur_px[c]``
+(:func:`blur_kernel`): a capture build demosaics and resamples the photographs' camera RGB, so
+the blur acts after the colour mixing; it is left out entirely when every ``blur_px`` is 0.
 
 Every operation is exact at its null value (``dc = df = 0``: the displacement is ``-0``, the
 sample sits on the pixel centre with Catmull-Rom weights 0, 1, 0, 0, ``L * 1 + L' * 0 ...``; ``k = 0``: ``L * 1``;
@@ -48,7 +53,7 @@ import numpy as np
 from abs.render.camera import Camera
 from abs.render.jit import from_numpy, opaque
 
-__all__ = ["Sensor", "radial_moments"]
+__all__ = ["Sensor", "blur_kernel", "radial_moments"]
 
 # Below this value the logarithm in the response is clamped (a black pixel stays black).
 _TINY = 1e-30
@@ -97,6 +102,43 @@ def radial_moments(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         return a.reshape(camera.height, b, camera.width, b).mean(axis=(1, 3))
 
     return block_mean(r2), block_mean(r2 * r2)
+
+
+def blur_kernel(sigma_px: float) -> np.ndarray:
+    """Symmetric weights on the integer offsets ``-r .. r`` whose variance is ``sigma_px**2``.
+
+    A sampled Gaussian ``exp(-k^2 / 2 s^2)``, normalised, with ``s`` chosen (by bisection) so that
+    the discrete kernel's variance is exactly ``sigma_px**2``: for the sub-pixel blurs of a
+    capture's processing, a Gaussian sampled at ``s = sigma_px`` would have the wrong variance
+    (about 0.25 px^2 instead of 0.16 at ``sigma_px = 0.4``), and the variance is what sets the
+    blur's effect on low spatial frequencies. ``r = max(1, ceil(3 sigma_px))``.
+
+    Parameters
+    ----------
+    sigma_px : float
+        Standard deviation in pixels, >= 0 (0: the identity ``[1]``).
+
+    Returns
+    -------
+    ndarray, shape (2 r + 1,)
+        Non-negative weights summing to 1.
+    """
+    if not sigma_px >= 0 or not np.isfinite(sigma_px):
+        raise ValueError(f"blur must be a finite standard deviation >= 0 pixels, got {sigma_px}")
+    if sigma_px == 0:
+        return np.ones(1)
+    r = max(1, int(np.ceil(3.0 * sigma_px)))
+    k = np.arange(-r, r + 1, dtype=np.float64)
+
+    def kernel(s):
+        g = np.exp(-0.5 * (k / s) ** 2)
+        return g / g.sum()
+
+    lo, hi = 1e-3, 4.0 * sigma_px + 1.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if np.sum(kernel(mid) * k * k) < sigma_px ** 2 else (lo, mid)
+    return kernel(0.5 * (lo + hi))
 
 
 class Sensor:
@@ -151,7 +193,7 @@ class Sensor:
         k1 = dr.gather(mi.Float, self.vignetting, mi.UInt32(0))
         k2 = dr.gather(mi.Float, self.vignetting, mi.UInt32(1))
         veiled = flat * (1.0 + k1 * r2 + k2 * r4) + dr.gather(mi.Float, self.stray_light, channel)
-        mixed = self._mix(veiled, channel)
+        mixed = self._blur(self._mix(veiled, channel), camera)
         gamma = dr.gather(mi.Float, self.response, channel)
         # x ** gamma written as x * x ** (gamma - 1): exactly x at gamma = 1, with the derivative
         # x log x there, and no NaN at x = 0.
@@ -195,6 +237,42 @@ class Sensor:
                 row = term if row is None else row + term
             out = wy[n] * row if out is None else out + wy[n] * row
         return out
+
+    def _blur(self, flat: mi.Float, camera: Camera) -> mi.Float:
+        """The (H, W, 3) image ``flat`` blurred by the camera's point-spread function
+        (``camera.blur_px``, full-resolution pixels, per channel): separable kernels of
+        :func:`blur_kernel` on the rendered pixels (``blur_px / block``: blurring and block
+        averaging are both convolutions, so they commute), edge pixels repeated at the border.
+        The image itself when every channel's blur is 0."""
+        sigma = np.asarray(camera.blur_px, np.float64) / camera.block
+        if not np.any(sigma > 0):
+            return flat
+        kernels = [blur_kernel(s) for s in sigma]
+        radius = max(len(k) for k in kernels) // 2
+        # One row of 2 radius + 1 weights per channel, shorter kernels padded with zeros.
+        table = np.zeros((3, 2 * radius + 1))
+        for c, k in enumerate(kernels):
+            pad = radius - len(k) // 2
+            table[c, pad:pad + len(k)] = k
+        weights = opaque(mi.Float, table.ravel().astype(np.float32))
+        h, w = camera.height, camera.width
+        width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
+        lane = dr.arange(mi.UInt32, h * w * 3)
+        pixel = mi.Int32(lane // 3)
+        channel = mi.Int32(lane) - 3 * pixel
+        x, y = pixel % width, pixel // width
+        for along_x in (True, False):
+            out = None
+            for m in range(2 * radius + 1):
+                weight = dr.gather(mi.Float, weights, mi.UInt32(channel * (2 * radius + 1) + m))
+                if along_x:
+                    i, j = dr.clip(x + (m - radius), 0, width - 1), y
+                else:
+                    i, j = x, dr.clip(y + (m - radius), 0, height - 1)
+                term = weight * dr.gather(mi.Float, flat, mi.UInt32(3 * (j * width + i) + channel))
+                out = term if out is None else out + term
+            flat = out
+        return flat
 
     def _mix(self, flat: mi.Float, channel: mi.UInt32) -> mi.Float:
         """``sum_j M_cj x_j`` for every (pixel, channel ``c``) lane of the (H, W, 3) image
