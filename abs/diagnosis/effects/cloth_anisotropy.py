@@ -1,0 +1,43 @@
+"""``cloth_anisotropy``: a woven cloth reflects part of its light off its threads, more strongly
+along one of its two thread directions, where the scene file's diffuse material reflects it
+equally in all directions (Lambertian).
+
+The model (``[materials.NAME] anisotropy = [warp, weft]``: the fractions of the reflected light
+that leave by the warp's and the weft's lobes, energy-conserving anisotropic microfacet lobes of
+threads along the material's ``thread_direction`` and across it) is
+:mod:`abs.render.bsdfs.diffuse`. Its derivative at ``[0, 0]`` is not zero (the lobes move light
+between directions at first order), so it is scored by the score test.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from abs.diagnosis.effects.base import Effect, missing, register
+
+
+@register
+class ClothAnisotropy(Effect):
+    name = "cloth_anisotropy"
+
+    def targets(self, scene, compiled) -> list[str]:
+        used = {o.material for o in scene.objects}
+        # Materials on some object whose threads' lobes sit at their null value (a Lambertian
+        # surface): whatever the type, if it has the field.
+        return [name for name in scene.materials
+                if name in used and missing(scene, compiled.specs, f"{name}.anisotropy")]
+
+    def add(self, data: dict, target: str) -> None:
+        data["materials"][target]["anisotropy"] = [0.0, 0.0]
+
+    def parameters(self, target: str) -> tuple[str, ...]:
+        return (f"{target}.anisotropy",)
+
+    def explain(self, target: str, values: dict) -> str:
+        warp, weft = np.asarray(values[f"{target}.anisotropy"], float).ravel()[:2]
+        stronger = "along" if warp >= weft else "across"
+        return (f"The material '{target}' reflects like a woven cloth: {100 * warp:.2g} % of its "
+                f"reflected light ({warp:.2g}) leaves by the lobe of the threads along its "
+                f"thread_direction and {100 * weft:.2g} % ({weft:.2g}) by the lobe of those across "
+                f"it, so it looks brighter where light glances {stronger} that direction; the "
+                f"scene file reflects it equally in all directions (Lambertian).")
