@@ -15,6 +15,7 @@ import pytest
 from abs.diagnosis.effects import effects
 from abs.errors import SceneError
 from abs.render import PathTracer, compile_scene
+from abs.render.bsdfs.diffuse import DiffuseBSDF
 from abs.scene import load_scene, write_scene
 from conftest import assert_same_rendering
 from gradcheck import assert_gradients_agree, directional_gradient, gradient_setup
@@ -40,11 +41,24 @@ def _stock(compiled) -> mi.Scene:
 
 
 def test_null_is_mitsubas_diffuse(setup):
+    """At [0, 0] the plugin skips the lobes (unless the weights are attached to the AD graph);
+    with the lobes traced, weighted by 0, it renders the same bits."""
     compiled, camera, _ = setup
     assert compiled.get(NAME).tolist() == [0.0, 0.0]
     image = compiled.render(camera, spp=4, seed=2, max_depth=4).numpy()
     stock = PathTracer(max_depth=4).render(_stock(compiled), compiled.environment, camera, 4, 2)
     assert_same_rendering(image, stock.numpy())
+    bsdfs = [s.bsdf() for s in compiled.mitsuba_scene.shapes() if isinstance(s.bsdf(), DiffuseBSDF)]
+    assert len(bsdfs) == 2 and not any(b.lobes for b in bsdfs)
+    for b in bsdfs:
+        b.lobes = True
+    try:
+        traced = compiled.render(camera, spp=4, seed=2, max_depth=4).numpy()
+    finally:
+        for b in bsdfs:
+            b.parameters_changed([])
+    assert not any(b.lobes for b in bsdfs)
+    assert_same_rendering(traced, stock.numpy())
     # and the weights change it: the check is not vacuous
     compiled.set(NAME, [0.3, 0.1])
     try:

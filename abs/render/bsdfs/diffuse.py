@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 __all__ = ["DiffuseBSDF", "PLUGIN"]
 
@@ -125,6 +126,16 @@ class DiffuseBSDF(mi.BSDF):
         flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
         self.m_components = [flags]
         self.m_flags = flags
+        self._check_lobes()
+
+    def _check_lobes(self) -> None:
+        """Whether the lobes are traced at all: not at the null value unless the weights are
+        attached to the AD graph (a derivative at the null value needs them). Tracing them costs
+        about 40 % of a render of a diffuse scene; either way the plain surface is bit for bit
+        the same. Decided when the weights are written (``parameters_changed``), before any
+        render traces the BSDF, and only a new write changes it."""
+        self.lobes = dr.grad_enabled(self.anisotropy) or bool(
+            np.any(np.asarray(dr.detach(self.anisotropy)) != 0.0))
 
     # ------------------------------------------------------------ the lobe
     def _weights(self) -> tuple[mi.Float, mi.Float]:
@@ -199,10 +210,11 @@ class DiffuseBSDF(mi.BSDF):
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
         bs.sampled_component = mi.UInt32(0)
         value = self.reflectance.eval(si, active)
-        a_warp, a_weft = self._weights()
-        # f cos_o / pdf, with pdf = cos_o / pi: rho at the null value exactly (rho * (1 + 0)).
-        factor = (1.0 - a_warp - a_weft) + dr.pi * self._lobes(si, bs.wo, a_warp, a_weft)
-        return bs, (value * factor) & (active & (bs.pdf > 0.0))
+        if self.lobes:
+            a_warp, a_weft = self._weights()
+            # f cos_o / pdf, with pdf = cos_o / pi: rho at the null value exactly (rho * (1 + 0)).
+            value = value * ((1.0 - a_warp - a_weft) + dr.pi * self._lobes(si, bs.wo, a_warp, a_weft))
+        return bs, value & (active & (bs.pdf > 0.0))
 
     def eval(self, ctx, si, wo, active=True):
         value, _ = self.eval_pdf(ctx, si, wo, active)
@@ -221,11 +233,14 @@ class DiffuseBSDF(mi.BSDF):
         cos_theta_i, cos_theta_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
         active = active & (cos_theta_i > 0.0) & (cos_theta_o > 0.0)
         value = self.reflectance.eval(si, active)
-        a_warp, a_weft = self._weights()
-        # (rho / pi) * cos_o as Mitsuba's diffuse computes it, plus the lobes: at the null value
-        # ((rho / pi) * 1 + rho * 0) * cos_o, the same bits.
-        f = (value * dr.inv_pi * (1.0 - a_warp - a_weft) + value * self._lobes(si, wo, a_warp, a_weft)) \
-            * cos_theta_o
+        if self.lobes:
+            a_warp, a_weft = self._weights()
+            # (rho / pi) * cos_o as Mitsuba's diffuse computes it, plus the lobes: at the null
+            # value ((rho / pi) * 1 + rho * 0) * cos_o, the same bits.
+            f = (value * dr.inv_pi * (1.0 - a_warp - a_weft)
+                 + value * self._lobes(si, wo, a_warp, a_weft)) * cos_theta_o
+        else:
+            f = value * dr.inv_pi * cos_theta_o
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
         return dr.select(active, f, 0.0), dr.select(active, pdf, 0.0)
 
@@ -234,7 +249,7 @@ class DiffuseBSDF(mi.BSDF):
         callback.put("anisotropy", self.anisotropy, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        pass
+        self._check_lobes()
 
     def to_string(self):
         return (f"DiffuseBSDF[reflectance={self.reflectance}, anisotropy={self.anisotropy}, "
