@@ -4,8 +4,10 @@ anisotropic lobe of woven threads (``anisotropy``), differentiable in the lobe's
 Why not Mitsuba's ``diffuse``: it has no anisotropic lobe, and a parameter the diagnosis may
 release (``<material>.anisotropy``) must exist in every compiled diffuse material, at its null
 value too, so the same plugin renders the plain surface. At the null value it is Mitsuba's
-``diffuse`` operation for operation (the same warp, pdf and texture lookup; the lobe enters as
-``x * 1 + 0``), so it renders the same image bit for bit (``tests/test_cloth_anisotropy.py``).
+``diffuse`` operation for operation (the same warp, pdf and texture lookup): detached at
+``[0, 0]`` it does not trace the lobes at all (they cost about 40 % of a render), attached (a
+derivative at the null value) the lobes enter as ``x * 1 + 0``; both render the same image bit
+for bit (``tests/test_cloth_anisotropy.py``).
 
 Model (units: BRDF in 1/sr). A plain weave is warp threads along ``t`` and weft threads across
 them. A thread is a cylinder: the normals of its surface turn by up to 90 degrees across the
@@ -13,22 +15,29 @@ thread but hardly along it (only by the crimp of the weave, where it passes over
 crossing threads). As microfacets, that is an anisotropic slope distribution: narrow along the
 thread (GGX ``alpha_along``), wide across it (``alpha_across``). The BRDF is::
 
-    f = rho * ((1 - a_warp - a_weft) / pi + a_warp f_s(warp) + a_weft f_s(weft))
-    f_s = D(h) G(wi, wo) / (4 cos_i cos_o)
+    f    = rho * ((1 - a_warp - a_weft) / pi + a_warp f_l(warp) + a_weft f_l(weft))
+    f_l  = f_s + f_ms
+    f_s  = D(h) G(wi, wo) / (4 cos_i cos_o)
+    f_ms = (1 - E(wi)) (1 - E(wo)) / (pi (1 - E_avg))
 
 ``rho`` the reflectance (a colour or a texture), ``a = anisotropy = [a_warp, a_weft]`` the
 fractions of the reflected light that leave by the threads' lobes (each in [0, 0.5], so the
 Lambertian weight stays >= 0), ``D`` the anisotropic GGX distribution in the frame of the threads
 (warp: alpha ``(along, across)`` about ``t``; weft: the same turned by 90 degrees), ``G`` Smith's
 shadowing-masking and the Fresnel factor 1 (a fibre's sheen is folded into ``a``; Mitsuba's
-``roughconductor`` with ``material = "none"`` is this ``f_s``). Why this form:
+``roughconductor`` with ``material = "none"`` is this ``f_s``, tested). ``f_ms`` is Kulla and
+Conty's (2017) multiple-scattering term: ``E(w)`` the single-scattering lobe's directional albedo
+(tabulated on loading over 33 polar angles and 9 azimuths, bilinear), ``E_avg`` its cosine-weighted
+mean. Why this form:
 
 - **Lambertian at 0**: ``a = 0`` is the plain model exactly.
-- **Energy**: a single-scattering microfacet lobe with ``F = 1`` reflects at most the light it
-  receives (Smith ``G <= 1``, ``D`` normalised over projected area), so the directional albedo is
-  at most ``rho``, the Lambertian's: the lobes redistribute light over directions, they do not
-  add any. So ``a`` is nearly orthogonal to a fitted reflectance or brightness.
-- **Reciprocity**: ``D(h) G(wi, wo) / (cos_i cos_o)`` is symmetric in ``wi`` and ``wo``.
+- **Energy**: single scattering alone loses the light the threads mask (half of it for alphas
+  0.3 and 1: the lobe would darken the cloth, and ``a`` would stand in for a wrong reflectance);
+  with ``f_ms`` every direction's albedo is ``E + (1 - E) = 1`` times ``rho`` (to 1.5 %, the
+  table's interpolation; tested), the Lambertian's. The lobes redistribute light over
+  directions, they neither add nor remove any, so ``a`` is nearly orthogonal to a fitted
+  reflectance or brightness.
+- **Reciprocity**: ``f_s`` and ``f_ms`` are symmetric in ``wi`` and ``wo`` (tested).
 - **Colour**: the lobes carry ``rho``: the light leaving a dyed thread has crossed its fibres.
 
 Thread direction: ``thread_direction`` is a fixed direction in world space, projected onto each
@@ -41,7 +50,7 @@ Sampling: cosine-weighted hemisphere, as Mitsuba's ``diffuse`` does, whatever ``
 broad (alpha >= 0.05 along, typically 0.3 along and 1 across), and a pdf independent of ``a``
 keeps the null bit for bit, next-event estimation's MIS weights unchanged, and the derivative
 with respect to ``a`` (it only reweights samples) unbiased in every render mode. The sample
-weight is ``rho (1 - a_warp - a_weft + pi (a_warp f_s(warp) + a_weft f_s(weft)))``.
+weight is ``rho (1 - a_warp - a_weft + pi (a_warp f_l(warp) + a_weft f_l(weft)))``.
 """
 
 from __future__ import annotations
