@@ -205,3 +205,23 @@ def test_effect_offers_itself_and_round_trips(small_scene_dir, tmp_path):
     assert compiled.get(NAME) == pytest.approx([0.2, 0.05])
     np.testing.assert_allclose(np.array(compiled.params[NAME]), [0.2, 0.05], rtol=1e-6)
     assert [c.target for c in effect.candidates(again, compiled)] == ["backdrop"]
+
+
+def test_fits_with_the_effect_render_more_samples(small_scene_dir, tmp_path, monkeypatch):
+    """A model with the threads' lobes is fitted at ``fit_spp_factor`` times the samples (a
+    fixed-seed fit at few samples follows the noise the lobes' weights put into each sample);
+    a model without it at the settings' own."""
+    from abs.diagnosis import select
+    from abs.fitting import FitSettings
+
+    seen = []
+    monkeypatch.setattr(select, "fit", lambda scene, capture, names, settings, **kw: seen.append(settings))
+    monkeypatch.setattr(select, "model_identity", lambda *args: {})  # no capture here
+    scene = load_scene(_scene_text(small_scene_dir, tmp_path, ""))
+    (candidate,) = [c for c in effects()["cloth_anisotropy"].candidates(scene, compile_scene(scene))
+                    if c.target == "cloth"]
+    settings = FitSettings(spp=8)
+    select.fit_model(scene, None, (), {}, settings, tmp_path / "control.toml")
+    select.fit_model(scene, None, (candidate,), {}, settings, tmp_path / "trial.toml")
+    assert [s.spp for s in seen] == [8, 8 * effects()["cloth_anisotropy"].fit_spp_factor]
+    assert effects()["cloth_anisotropy"].fit_spp_factor > 1

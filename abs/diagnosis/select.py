@@ -99,6 +99,9 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     names = tuple(n for n in extended.fit_parameters if n not in held)
     if any(effect(c.effect).full_resolution for c in candidates):
         settings = replace(settings, downsample=1)
+    spp_factor = max((effect(c.effect).fit_spp_factor for c in candidates), default=1)
+    if spp_factor > 1:
+        settings = replace(settings, spp=settings.spp * spp_factor)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
     identity = model_identity(extended, capture, names, initial, settings)

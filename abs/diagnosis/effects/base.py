@@ -64,12 +64,18 @@ class Effect(ABC):
         The score test renders its residual and Jacobian at this many times the fits' samples
         per pixel (candidates scored together use the largest of theirs). The test's power grows
         with the samples: its noise is mostly the renders'.
+    fit_spp_factor : int
+        Fits of a model with the effect render at this many times the fits' samples per pixel
+        (the largest of its effects'): for a parameter that reweights each sample by a different
+        amount, so that a fixed-seed fit's noise depends on it and a fit at few samples follows
+        the noise (the threads' lobes of ``cloth_anisotropy``).
     """
 
     name: ClassVar[str]
     zero_null_derivative: ClassVar[bool] = False
     full_resolution: ClassVar[bool] = False
     score_spp_factor: ClassVar[int] = 4
+    fit_spp_factor: ClassVar[int] = 1
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:

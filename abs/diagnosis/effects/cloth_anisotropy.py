@@ -19,6 +19,11 @@ from abs.diagnosis.effects.base import Effect, missing, register
 @register
 class ClothAnisotropy(Effect):
     name = "cloth_anisotropy"
+    # The lobes reweight each cosine-weighted sample by its own amount, so the noise of a
+    # fixed-seed render depends on the weights: on the suite's sphere case (truth [0.1, 0.3]) the
+    # fit at 8 spp followed it to [0.49, 0.50], raising the training error, whereas at 64 spp it
+    # converged to [0.09, 0.31], where the 64-spp error is smallest.
+    fit_spp_factor = 8
 
     def targets(self, scene, compiled) -> list[str]:
         used = {o.material for o in scene.objects}
