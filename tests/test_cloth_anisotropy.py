@@ -225,3 +225,18 @@ def test_fits_with_the_effect_render_more_samples(small_scene_dir, tmp_path, mon
     select.fit_model(scene, None, (candidate,), {}, settings, tmp_path / "trial.toml")
     assert [s.spp for s in seen] == [8, 8 * effects()["cloth_anisotropy"].fit_spp_factor]
     assert effects()["cloth_anisotropy"].fit_spp_factor > 1
+
+
+def test_models_with_the_effect_are_compared_on_crossed_errors():
+    """The lobes reweight each sample by its own amount, so shared seeds no longer cancel the
+    two models' noise: the holdout comparison uses independent renders' crossed errors."""
+    from types import SimpleNamespace
+
+    from abs.diagnosis.effects.base import Candidate
+    from abs.diagnosis.select import _changes_sampling
+
+    control = SimpleNamespace(candidates=())
+    lobes = SimpleNamespace(candidates=(Candidate("cloth_anisotropy", "cloth", ("cloth.anisotropy",)),))
+    stray = SimpleNamespace(candidates=(Candidate("stray_light", "sensor", ("sensor.stray_light",)),))
+    assert _changes_sampling(control, lobes)
+    assert not _changes_sampling(control, stray)

@@ -180,8 +180,10 @@ def _holdout_errors(reference: ModelFit, extended: ModelFit, crossed: tuple | No
 
 def _changes_sampling(reference: ModelFit, extended: ModelFit) -> bool:
     """``extended`` adds an effect that changes how the renderer samples light paths (a rough
-    interface, a spread exit point), so equal seeds no longer give the two models the same paths."""
-    return any(effect(c.effect).zero_null_derivative
+    interface, a spread exit point), so equal seeds no longer give the two models the same paths,
+    or one that reweights each path by its own amount (``Effect.crossed_comparison``: the
+    threads' lobes), so the same paths no longer carry the same noise."""
+    return any(effect(c.effect).zero_null_derivative or effect(c.effect).crossed_comparison
                for c in set(extended.candidates) ^ set(reference.candidates))
 
 

@@ -69,6 +69,11 @@ class Effect(ABC):
         (the largest of its effects'): for a parameter that reweights each sample by a different
         amount, so that a fixed-seed fit's noise depends on it and a fit at few samples follows
         the noise (the threads' lobes of ``cloth_anisotropy``).
+    crossed_comparison : bool
+        Models with and without the effect are compared on crossed errors of independent renders
+        (:func:`abs.diagnosis.select.compare`), as those of effects that change the sampling are
+        (``zero_null_derivative`` ones): its parameter reweights each sample by its own amount,
+        so the two models' noise no longer cancels in a paired difference of shared seeds.
     """
 
     name: ClassVar[str]
@@ -76,6 +81,7 @@ class Effect(ABC):
     full_resolution: ClassVar[bool] = False
     score_spp_factor: ClassVar[int] = 4
     fit_spp_factor: ClassVar[int] = 1
+    crossed_comparison: ClassVar[bool] = False
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:
