@@ -321,7 +321,7 @@ QUICK = ["sphere-absorption", "sphere-vignetting", "sphere-stray_light", "sphere
          "sphere-env_distance", "sphere-surface_roughness", "sphere-subsurface", "cloth-subsurface",
          "box-pose", "box-camera_response", "sphere-colour_transform",
          "sphere-environment_rotation", "sphere-camera_misalignment", "sphere-probe_fresnel",
-         "noisy-surface_detail", "sphere-null", "box-null",
+         "noisy-surface_detail", "sphere-cloth_anisotropy", "sphere-null", "box-null",
          "sphere-absorption+vignetting"]
 
 
