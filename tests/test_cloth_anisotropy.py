@@ -209,8 +209,8 @@ def test_effect_offers_itself_and_round_trips(small_scene_dir, tmp_path):
 
 def test_fits_with_the_effect_render_more_samples(small_scene_dir, tmp_path, monkeypatch):
     """A model with the threads' lobes is fitted at ``fit_spp_factor`` times the samples (a
-    fixed-seed fit at few samples follows the noise the lobes' weights put into each sample);
-    a model without it at the settings' own."""
+    fixed-seed fit at few samples follows the noise the lobes' weights put into each sample) and
+    without refinement; a model without it at the settings' own."""
     from abs.diagnosis import select
     from abs.fitting import FitSettings
 
@@ -225,6 +225,8 @@ def test_fits_with_the_effect_render_more_samples(small_scene_dir, tmp_path, mon
     select.fit_model(scene, None, (candidate,), {}, settings, tmp_path / "trial.toml")
     assert [s.spp for s in seen] == [8, 8 * effects()["cloth_anisotropy"].fit_spp_factor]
     assert effects()["cloth_anisotropy"].fit_spp_factor > 1
+    # and without the Gauss-Newton refinement, whose noisy cross-curvature steps jumped
+    assert [s.refinement_steps for s in seen] == [settings.refinement_steps, 0]
 
 
 def test_models_with_the_effect_are_compared_on_crossed_errors():

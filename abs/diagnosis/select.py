@@ -102,6 +102,8 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     spp_factor = max((effect(c.effect).fit_spp_factor for c in candidates), default=1)
     if spp_factor > 1:
         settings = replace(settings, spp=settings.spp * spp_factor)
+    if not all(effect(c.effect).fit_refinement for c in candidates):
+        settings = replace(settings, refinement_steps=0)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
     identity = model_identity(extended, capture, names, initial, settings)

@@ -69,6 +69,12 @@ class Effect(ABC):
         (the largest of its effects'): for a parameter that reweights each sample by a different
         amount, so that a fixed-seed fit's noise depends on it and a fit at few samples follows
         the noise (the threads' lobes of ``cloth_anisotropy``).
+    fit_refinement : bool
+        ``False``: fits of a model with the effect skip the Gauss-Newton refinement after
+        Levenberg-Marquardt (``refinement_steps = 0``): its steps come from the cross-curvature of
+        two independent noisy Jacobians, which for such a parameter jumped by the whole trust
+        radius in every coordinate; with ``fit_spp_factor`` the fixed seeds' bias it would
+        average out is small.
     crossed_comparison : bool
         Models with and without the effect are compared on crossed errors of independent renders
         (:func:`abs.diagnosis.select.compare`), as those of effects that change the sampling are
@@ -81,6 +87,7 @@ class Effect(ABC):
     full_resolution: ClassVar[bool] = False
     score_spp_factor: ClassVar[int] = 4
     fit_spp_factor: ClassVar[int] = 1
+    fit_refinement: ClassVar[bool] = True
     crossed_comparison: ClassVar[bool] = False
 
     @abstractmethod
