@@ -115,9 +115,13 @@ def _stratified(k: mi.UInt32) -> mi.Point2f:
 
 
 class DiffuseBSDF(mi.BSDF):
-    """Lambertian reflectance ``reflectance`` (texture) with the threads' lobes of weights
-    ``anisotropy`` (``[warp, weft]``), threads along ``thread_direction`` (world frame) with GGX
-    roughness ``thread_roughness`` (``[along, across]``). See the module docstring."""
+    """Lambertian reflectance with the threads' lobes (see the module docstring).
+
+    Mitsuba properties: ``reflectance`` (a texture; default 0.5), ``anisotropy_warp`` and
+    ``anisotropy_weft`` (the lobes' weights, default 0; the parameter ``anisotropy`` holds both),
+    ``thread_direction`` (a world-frame vector, default +x), ``thread_along`` and
+    ``thread_across`` (GGX alphas of a thread, default 0.3 and 1).
+    """
 
     def __init__(self, props: mi.Properties):
         mi.BSDF.__init__(self, props)
