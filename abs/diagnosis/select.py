@@ -99,6 +99,11 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     names = tuple(n for n in extended.fit_parameters if n not in held)
     if any(effect(c.effect).full_resolution for c in candidates):
         settings = replace(settings, downsample=1)
+    spp_factor = max((effect(c.effect).fit_spp_factor for c in candidates), default=1)
+    if spp_factor > 1:
+        settings = replace(settings, spp=settings.spp * spp_factor)
+    if not all(effect(c.effect).fit_refinement for c in candidates):
+        settings = replace(settings, refinement_steps=0)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
     identity = model_identity(extended, capture, names, initial, settings)
@@ -177,8 +182,10 @@ def _holdout_errors(reference: ModelFit, extended: ModelFit, crossed: tuple | No
 
 def _changes_sampling(reference: ModelFit, extended: ModelFit) -> bool:
     """``extended`` adds an effect that changes how the renderer samples light paths (a rough
-    interface, a spread exit point), so equal seeds no longer give the two models the same paths."""
-    return any(effect(c.effect).zero_null_derivative
+    interface, a spread exit point), so equal seeds no longer give the two models the same paths,
+    or one that reweights each path by its own amount (``Effect.crossed_comparison``: the
+    threads' lobes), so the same paths no longer carry the same noise."""
+    return any(effect(c.effect).zero_null_derivative or effect(c.effect).crossed_comparison
                for c in set(extended.candidates) ^ set(reference.candidates))
 
 

@@ -64,12 +64,31 @@ class Effect(ABC):
         The score test renders its residual and Jacobian at this many times the fits' samples
         per pixel (candidates scored together use the largest of theirs). The test's power grows
         with the samples: its noise is mostly the renders'.
+    fit_spp_factor : int
+        Fits of a model with the effect render at this many times the fits' samples per pixel
+        (the largest of its effects'): for a parameter that reweights each sample by a different
+        amount, so that a fixed-seed fit's noise depends on it and a fit at few samples follows
+        the noise (the threads' lobes of ``cloth_anisotropy``).
+    fit_refinement : bool
+        ``False``: fits of a model with the effect skip the Gauss-Newton refinement after
+        Levenberg-Marquardt (``refinement_steps = 0``): its steps come from the cross-curvature of
+        two independent noisy Jacobians, which for such a parameter jumped by the whole trust
+        radius in every coordinate; with ``fit_spp_factor`` the fixed seeds' bias it would
+        average out is small.
+    crossed_comparison : bool
+        Models with and without the effect are compared on crossed errors of independent renders
+        (:func:`abs.diagnosis.select.compare`), as those of effects that change the sampling are
+        (``zero_null_derivative`` ones): its parameter reweights each sample by its own amount,
+        so the two models' noise no longer cancels in a paired difference of shared seeds.
     """
 
     name: ClassVar[str]
     zero_null_derivative: ClassVar[bool] = False
     full_resolution: ClassVar[bool] = False
     score_spp_factor: ClassVar[int] = 4
+    fit_spp_factor: ClassVar[int] = 1
+    fit_refinement: ClassVar[bool] = True
+    crossed_comparison: ClassVar[bool] = False
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:

@@ -4,8 +4,9 @@
 plugin                    what
 ========================  ===================================================================
 ``abs_dielectric``        smooth glass, one IOR per colour channel, Beer-Lambert absorption
+``abs_diffuse``           Lambertian with an anisotropic lobe of woven threads (``anisotropy``)
 ``abs_tabulated``         isotropic measured BRDF table in MERL layout (differentiable values)
 ========================  ===================================================================
 """
 
-from abs.render.bsdfs import dielectric, tabulated  # noqa: F401  (registration side effect)
+from abs.render.bsdfs import dielectric, diffuse, tabulated  # noqa: F401  (registration side effect)
