@@ -648,26 +648,15 @@ def part_end_to_end_blur() -> dict:
     absorption and scale reweight one path-length recording per view instead of rendering at
     every step (issue 31), so the fit's samples are the recording's, and at 32 the simulated
     capture's green absorption is not measured (the fit says so: standard error 1e4)."""
-    from abs.acquisition.build import build_capture
-    from abs.io.capture import load_capture, save_capture
-    from abs.simulate import simulate_capture
-
     t0 = time.perf_counter()
     cfg = {**E2E, "fit_spp": 128}
     scene_path, scene, compiled, views, truth = _e2e_setup()
-    W, H = cfg["width"], cfg["height"]
     gain = cfg["gain_dn_per_s"]
     out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=W, height=H,
-                         spp=cfg["truth_spp"], shot_noise=1e-4, read_noise=0.003, seed=2)
-        raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg)
-        bilinear, _ = build_capture(raw / "build.json", tmp / "bilinear")
-        superpixel, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
-        save_capture(tmp / "unblurred", load_capture(tmp / "bilinear").views, blur_px=[0, 0, 0])
-        out["blur_px"] = {"bilinear": list(bilinear.views[0].blur_px),
-                          "superpixel": list(superpixel.views[0].blur_px)}
+        out["blur_px"] = _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=2,
+                                       noise_seed=3)
         print("blur_px", out["blur_px"], flush=True)
         runs = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
                 ("built_from_raw", "bilinear", gain, 1),
@@ -711,17 +700,31 @@ def part_end_to_end_blur_replicates() -> dict:
                         ("built_from_raw_superpixel", "superpixel", gain, 1)))
 
 
-def _replicates(cfg: dict, variants) -> dict:
-    """Fits of ``variants`` (label, capture folder, unit, downsample) for each replicate seed;
-    each seed's captures: ``simulated``, the ``bilinear`` and ``superpixel`` builds of its raw
-    brackets, and ``unblurred`` (the bilinear build without ``blur_px``)."""
+def _e2e_captures(tmp: Path, scene, compiled, views, cfg: dict, simulate_seed: int,
+                  noise_seed: int) -> dict:
+    """The end-to-end captures in ``tmp``: ``simulated`` (``abs simulate``), the ``bilinear``
+    and ``superpixel`` builds of the raw brackets, and ``unblurred`` (the bilinear build without
+    ``blur_px``). Returns the two builds' ``blur_px``."""
     from abs.acquisition.build import build_capture
-    from abs.io.capture import load_capture, save_capture
+    from abs.io.capture import save_capture
     from abs.simulate import simulate_capture
 
+    simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=cfg["width"],
+                     height=cfg["height"], spp=cfg["truth_spp"], shot_noise=1e-4,
+                     read_noise=0.003, seed=simulate_seed)
+    raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=noise_seed)
+    bilinear, _ = build_capture(raw / "build.json", tmp / "bilinear")
+    superpixel, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
+    save_capture(tmp / "unblurred", bilinear.views, blur_px=[0, 0, 0])
+    return {"bilinear": list(bilinear.views[0].blur_px),
+            "superpixel": list(superpixel.views[0].blur_px)}
+
+
+def _replicates(cfg: dict, variants) -> dict:
+    """Fits of ``variants`` (label, capture folder, unit, downsample) for each replicate seed
+    (:func:`_e2e_captures`' folders)."""
     t0 = time.perf_counter()
     scene_path, scene, compiled, views, truth = _e2e_setup()
-    W, H = cfg["width"], cfg["height"]
     out: dict = {"config": f"as end_to_end, fit_spp {cfg['fit_spp']}; sensor-noise seeds "
                            + ", ".join(map(str, E2E_REPLICATE_SEEDS))
                            + " (raw), the same seeds for abs simulate",
@@ -730,13 +733,7 @@ def _replicates(cfg: dict, variants) -> dict:
         rep: dict = {}
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
-            simulate_capture(scene, tmp / "simulated", n_cameras=cfg["views"], width=W, height=H,
-                             spp=cfg["truth_spp"], shot_noise=1e-4, read_noise=0.003, seed=seed)
-            raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=seed)
-            build_capture(raw / "build.json", tmp / "bilinear")
-            build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
-            save_capture(tmp / "unblurred", load_capture(tmp / "bilinear").views,
-                         blur_px=[0, 0, 0])
+            _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=seed, noise_seed=seed)
             for label, folder, unit, ds in variants:
                 rep[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
                 print(seed, label, np.round(rep[label]["glass_absorption_error"], 2),

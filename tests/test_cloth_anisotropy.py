@@ -26,8 +26,24 @@ NAME = "cloth.anisotropy"
 
 @pytest.fixture(scope="module")
 def setup(small_scene_dir):
+    # The small scene with threads (at [0, 0]) on both diffuse materials: a diffuse material whose
+    # file names none of the threads' fields is Mitsuba's own diffuse, without the parameter.
+    text = (small_scene_dir / "scene.toml").read_text()
+    path = small_scene_dir / "threads.toml"
+    path.write_text(text.replace('type = "diffuse"', 'type = "diffuse"\nanisotropy = [0.0, 0.0]'))
     # Looking down at the floor at a slant, where the threads' lobes reflect the environment.
-    return gradient_setup(small_scene_dir / "scene.toml", W, [0.0, 0.15, 0.3], [0.0, 0.02, 0.0], 40, 4)
+    return gradient_setup(path, W, [0.0, 0.15, 0.3], [0.0, 0.02, 0.0], 40, 4)
+
+
+def test_without_threads_a_diffuse_material_is_mitsubas(small_scene_dir):
+    """No thread field in the file: Mitsuba's diffuse, no anisotropy parameter, written back
+    without thread fields; the effect still offers the material (it adds the field)."""
+    scene = load_scene(small_scene_dir / "scene.toml")
+    compiled = compile_scene(scene)
+    assert compiled.mitsuba_dict()["cloth"]["type"] == "diffuse"
+    assert NAME not in compiled.specs
+    assert "anisotropy" not in scene.materials["cloth"].to_toml()
+    assert "cloth" in effects()["cloth_anisotropy"].targets(scene, compiled)
 
 
 def _stock(compiled) -> mi.Scene:

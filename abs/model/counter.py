@@ -21,7 +21,8 @@ class RenderCounter:
     ----------
     renders : int
         Primal, forward-mode and reverse-mode renders of one view (each counts once; a Jacobian
-        pass of an IOR counts its three renders, see ``CompiledScene.forward_renders``).
+        pass of an IOR counts the renders its central difference makes, two or three, see
+        ``CompiledScene.forward_renders``).
     samples : int
         Camera samples traced: ``width * height * spp`` summed over the renders.
     """

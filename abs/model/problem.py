@@ -283,9 +283,13 @@ class FitProblem:
                 rendered, derivative = self.compiled.render_recorded_forward(
                     recording, cam, {n: tangents[n] for n in reweightable})
             else:
+                # With a recording the image is its reweighting: an IOR's two-sided difference
+                # then needs no render at p (a quarter of a mixed fit's renders).
+                needed = recording is None
                 rendered, derivative = self.compiled.render_forward(
-                    cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth)
-                for _ in range(self.compiled.forward_renders(tangents)):
+                    cam, tangents, spp=spp, seed=seed, max_depth=self.max_depth,
+                    image_needed=needed)
+                for _ in range(self.compiled.forward_renders(tangents, image_needed=needed)):
                     self.counter.add(cam, spp)
             if image is None:
                 image = rendered.numpy().astype(np.float64)
@@ -334,9 +338,11 @@ class FitProblem:
                     grad[slices[name]] += (np.sum(g[name]) if name in self.vector.tied else g[name])
             for tangent, columns in self.column_passes(moving):
                 tangents = self.vector.tangents(tangent, moving)
+                # The image is the render above: an IOR's two-sided difference skips p's.
                 _, derivative = self.compiled.render_forward(
-                    cam, tangents, spp=spp, seed=view_seed, max_depth=self.max_depth)
-                for _ in range(self.compiled.forward_renders(tangents)):
+                    cam, tangents, spp=spp, seed=view_seed, max_depth=self.max_depth,
+                    image_needed=False)
+                for _ in range(self.compiled.forward_renders(tangents, image_needed=False)):
                     self.counter.add(cam, spp)
                 derivative = derivative.numpy() * residual
                 for i, channel in columns:

@@ -369,8 +369,8 @@ class CompiledScene:
         return dr.detach(recorded), mi.TensorXf(derivative)
 
     def render_forward(self, camera: Camera, tangents: dict, spp: int | None = None, seed: int = 0,
-                       max_depth: int | None = None,
-                       differences: bool = True) -> tuple[mi.TensorXf, mi.TensorXf]:
+                       max_depth: int | None = None, differences: bool = True,
+                       image_needed: bool = True) -> tuple[mi.TensorXf | None, mi.TensorXf]:
         """A rendering and its derivative along ``tangents``, by forward mode inside the path loop.
 
         Parameters
@@ -383,6 +383,10 @@ class CompiledScene:
             differences with common random numbers (:meth:`_central_difference`), which include
             the boundary terms of edges seen through refraction. ``False``: forward mode for
             every parameter (tangents inside the path loop; exact for glass that sees no edges).
+        image_needed : bool
+            ``False`` when the caller has the image already (a path-length recording at these
+            values): central differences on both sides then skip the render at ``p``, and
+            ``image`` is ``None`` where it was not rendered anyway.
 
         Returns
         -------
@@ -397,8 +401,11 @@ class CompiledScene:
             traced = {n: t for n, t in tangents.items() if n not in differenced}
             if any(np.any(np.asarray(t) != 0) for t in traced.values()):
                 image, derivative = self.render_forward(camera, traced, spp, seed, max_depth)
-            else:
+            elif image_needed or len(self._difference_signs(differenced)[1]) < 2:
+                # A one-sided difference starts from the render at p, with the same samples.
                 image, derivative = self.render(camera, spp, seed, max_depth), None
+            else:
+                image = derivative = None
             difference = self._central_difference(camera, differenced, spp, seed, max_depth, image)
             return image, difference if derivative is None else derivative + difference
         self._push_tangents(tangents)
@@ -418,11 +425,19 @@ class CompiledScene:
         finally:
             self._detach(tangents)
 
-    def forward_renders(self, tangents: dict, differences: bool = True) -> int:
-        """How many renders :meth:`render_forward` makes for ``tangents``: one, or three when a
-        parameter with a ``difference_step`` moves (its render at ``p`` and at ``p +- h``; two
-        when one side leaves the bounds, counted as three). For render accounting."""
-        return 3 if self._differenced(tangents, differences) else 1
+    def forward_renders(self, tangents: dict, differences: bool = True,
+                        image_needed: bool = True) -> int:
+        """How many renders :meth:`render_forward` makes for ``tangents`` (the same arguments):
+        one; with a moving parameter that has a ``difference_step``, its renders at ``p + h``
+        and ``p - h`` (one of them when the other side leaves the bounds), and the render at
+        ``p`` unless the image is not needed and the difference is two-sided. For render
+        accounting."""
+        differenced = self._differenced(tangents, differences)
+        if not differenced:
+            return 1
+        sides = len(self._difference_signs(differenced)[1])
+        traced = any(np.any(np.asarray(t) != 0) for n, t in tangents.items() if n not in differenced)
+        return sides + (1 if traced or image_needed or sides < 2 else 0)
 
     def _differenced(self, tangents: dict, differences: bool) -> dict:
         """The tangents that :meth:`render_forward` takes by central differences: nonzero, on
@@ -445,12 +460,7 @@ class CompiledScene:
         parameter's bounds becomes one-sided, from ``image`` (the render at ``p``).
         """
         base = {n: self.get(n).astype(np.float64) for n in tangents}
-        h = min(self._spec(n).difference_step / float(np.max(np.abs(t))) for n, t in tangents.items())
-
-        def inside(sign):
-            return all(np.all((self._spec(n).lower <= base[n] + sign * h * t)
-                              & (base[n] + sign * h * t <= self._spec(n).upper))
-                       for n, t in tangents.items())
+        h, signs = self._difference_signs(tangents)
 
         def at(sign):
             for n, t in tangents.items():
@@ -458,7 +468,6 @@ class CompiledScene:
             return self.render(camera, spp, seed, max_depth)
 
         try:
-            signs = [s for s in (1, -1) if inside(s)] or [1]
             upper = at(signs[0]) if signs[0] == 1 else image
             lower = at(-1) if -1 in signs else image
             width = h * (2 if len(signs) == 2 else 1)
@@ -468,6 +477,20 @@ class CompiledScene:
         finally:
             for n in tangents:
                 self.set(n, from_numpy(mi.Float, base[n].astype(np.float32)))
+
+    def _difference_signs(self, tangents: dict) -> tuple[float, list[int]]:
+        """The central difference's step ``h`` along ``tangents`` (the parameter with the largest
+        tangent moves by its ``difference_step``) and the sides ``+1``, ``-1`` whose step stays
+        within the bounds (``[1]`` when neither does)."""
+        base = {n: self.get(n).astype(np.float64) for n in tangents}
+        h = min(self._spec(n).difference_step / float(np.max(np.abs(t))) for n, t in tangents.items())
+
+        def inside(sign):
+            return all(np.all((self._spec(n).lower <= base[n] + sign * h * t)
+                              & (base[n] + sign * h * t <= self._spec(n).upper))
+                       for n, t in tangents.items())
+
+        return h, [s for s in (1, -1) if inside(s)] or [1]
 
     def render_backward(self, camera: Camera, weight, names, spp: int | None = None, seed: int = 0,
                         max_depth: int | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from abs.diagnosis.effects.base import Effect, missing, register
+from abs.scene.materials.diffuse import Diffuse
 
 
 @register
@@ -36,10 +37,13 @@ class ClothAnisotropy(Effect):
 
     def targets(self, scene, compiled) -> list[str]:
         used = {o.material for o in scene.objects}
-        # Materials on some object whose threads' lobes sit at their null value (a Lambertian
-        # surface): whatever the type, if it has the field.
+        # Materials on some object whose threads' lobes sit at their null value, or diffuse ones
+        # whose file names no thread at all (they compile to Mitsuba's diffuse and have no
+        # anisotropy parameter until add() gives them one): a Lambertian surface either way.
         return [name for name in scene.materials
-                if name in used and missing(scene, compiled.specs, f"{name}.anisotropy")]
+                if name in used and (missing(scene, compiled.specs, f"{name}.anisotropy")
+                                     or (isinstance(scene.materials[name], Diffuse)
+                                         and not scene.materials[name].threads))]
 
     def add(self, data: dict, target: str) -> None:
         data["materials"][target]["anisotropy"] = [0.0, 0.0]

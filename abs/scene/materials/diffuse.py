@@ -62,20 +62,29 @@ class Diffuse(Material):
         self.thread_direction = direction / np.linalg.norm(direction)
         self.thread_roughness = fields.vector("thread_roughness", 2, [0.3, 1.0],
                                               lower=THREAD_ROUGHNESS[0], upper=THREAD_ROUGHNESS[1])
+        # A material whose file names none of the threads' fields is plain Lambertian and compiles
+        # to Mitsuba's own diffuse: scenes without woven cloth render (and are rendered by plain
+        # Mitsuba, e.g. the glass benchmark's independent photographs) without abs's plugin.
+        self.threads = any(fields.has(k) for k in ("anisotropy", "thread_direction",
+                                                   "thread_roughness"))
         value = str(fields.raw("reflectance")) if self.texture is not None else self.reflectance_rgb.tolist()
-        self._toml = {"type": cls.type_name, "reflectance": value, "subsurface": self.subsurface_m,
-                      "anisotropy": self.anisotropy.tolist(),
-                      "thread_direction": self.thread_direction.tolist(),
-                      "thread_roughness": self.thread_roughness.tolist()}
+        self._toml = {"type": cls.type_name, "reflectance": value, "subsurface": self.subsurface_m}
+        if self.threads:
+            self._toml.update({"anisotropy": self.anisotropy.tolist(),
+                               "thread_direction": self.thread_direction.tolist(),
+                               "thread_roughness": self.thread_roughness.tolist()})
         return self
 
     def to_mitsuba(self) -> dict:
         import mitsuba as mi
 
-        # abs's plugin at every value, the null one included: the anisotropy parameter must exist
-        # in the compiled scene wherever a fit may release it (it is Mitsuba's diffuse there).
         reflectance = (texture_dict(self.texture) if self.texture is not None
                        else {"type": "rgb", "value": self.reflectance_rgb.tolist()})
+        if not self.threads:
+            return {"type": "diffuse", "reflectance": reflectance}
+        # With threads, abs's plugin at every value, the null one included: the anisotropy
+        # parameter must exist in the compiled scene wherever a fit may release it (it is
+        # Mitsuba's diffuse there).
         return {"type": "abs_diffuse", "reflectance": reflectance,
                 "anisotropy_warp": float(self.anisotropy[0]), "anisotropy_weft": float(self.anisotropy[1]),
                 "thread_direction": mi.ScalarVector3f(*map(float, self.thread_direction)),
@@ -85,15 +94,15 @@ class Diffuse(Material):
     def parameters(self) -> dict[str, ParameterSpec]:
         # Read by the path tracer (abs.render.integrator), not by the Mitsuba BSDF.
         extensions = {
-            "subsurface": ParameterSpec("subsurface", 1, "m", 0.0, SUBSURFACE_MAX_M, None, null=0.0),
+            "subsurface": ParameterSpec("subsurface", 1, "m", 0.0, SUBSURFACE_MAX_M, None, null=0.0)}
+        if self.threads:
             # Weights of the threads' lobes ([warp, weft]); [0, 0]: plain Lambertian. They
             # reweight the BSDF's samples only (its sampling does not depend on them). No
             # typical_step: with both bounds finite it sets the sigmoid's gain from the start,
             # and a start on the lower bound (the null value) made the gain about 1000, a step
             # function between 0 and 0.5 (a diagnosis's fit jumped to 0.45 for a true 0.3).
-            "anisotropy": ParameterSpec("anisotropy", 2, "1", 0.0, ANISOTROPY_MAX, "anisotropy",
-                                        null=0.0),
-        }
+            extensions["anisotropy"] = ParameterSpec("anisotropy", 2, "1", 0.0, ANISOTROPY_MAX,
+                                                     "anisotropy", null=0.0)
         if self.texture is not None:
             # The whole texture (H x W x 3 values) is the parameter; its size is known once loaded.
             return {"reflectance": ParameterSpec("reflectance", -1, "1", 0.0, 1.0, "reflectance.data"),
