@@ -1,9 +1,11 @@
 """``abs_diffuse``: the ``diffuse`` material's BSDF, a Lambertian surface with an optional
 anisotropic lobe of woven threads (``anisotropy``), differentiable in the lobe's weights.
 
-Why not Mitsuba's ``diffuse``: it has no anisotropic lobe, and a parameter the diagnosis may
-release (``<material>.anisotropy``) must exist in every compiled diffuse material, at its null
-value too, so the same plugin renders the plain surface. At the null value it is Mitsuba's
+Why not Mitsuba's ``diffuse``: it has no anisotropic lobe. A ``diffuse`` material whose file names
+a thread field (``anisotropy``, ``thread_direction``, ``thread_roughness``; the diagnosis adds
+``anisotropy = [0, 0]`` when it tries the effect) compiles to this plugin, at the null value too,
+so that the parameter exists wherever a fit may release it; without thread fields a material is
+Mitsuba's ``diffuse`` itself (:mod:`abs.scene.materials.diffuse`). At the null value it is Mitsuba's
 ``diffuse`` operation for operation (the same warp, pdf and texture lookup): detached at
 ``[0, 0]`` it does not trace the lobes at all (they cost about 40 % of a render), attached (a
 derivative at the null value) the lobes enter as ``x * 1 + 0``; both render the same image bit
@@ -59,6 +61,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from abs.render.jit import opaque
+
 __all__ = ["DiffuseBSDF", "PLUGIN"]
 
 PLUGIN = "abs_diffuse"
@@ -66,14 +70,6 @@ PLUGIN = "abs_diffuse"
 # Below this length of the thread direction projected onto the tangent plane, the direction is
 # normal to the surface and the shading frame's own tangent stands in (no 0/0).
 _IN_PLANE_EPS = 1e-4
-
-
-def _opaque(values: list[float]) -> mi.Float:
-    """A ``Float`` held in memory, not as a kernel literal: another value (a fit's step, another
-    scene) reuses the compiled kernels."""
-    x = mi.Float(values)
-    dr.make_opaque(x)
-    return x
 
 
 # The albedo table: directions of incidence at _N_THETA polar angles from 0 to 90 degrees and
@@ -127,15 +123,16 @@ class DiffuseBSDF(mi.BSDF):
         mi.BSDF.__init__(self, props)
         self.reflectance = props.get_texture("reflectance", 0.5)
         # Properties hold no 2-vectors: the pairs arrive as separate numbers.
-        self.anisotropy = _opaque([float(props.get("anisotropy_warp", 0.0)),
-                                   float(props.get("anisotropy_weft", 0.0))])
+        self.anisotropy = opaque(mi.Float, np.array([float(props.get("anisotropy_warp", 0.0)),
+                                                     float(props.get("anisotropy_weft", 0.0))]))
         thread = props.get("thread_direction", mi.ScalarVector3f(1.0, 0.0, 0.0))
-        self.thread = mi.Vector3f(*[_opaque([float(thread[i])]) for i in range(3)])
-        self.along = _opaque([float(props.get("thread_along", 0.3))])
-        self.across = _opaque([float(props.get("thread_across", 1.0))])
+        self.thread = mi.Vector3f(*[opaque(mi.Float, np.array([float(thread[i])]))
+                                    for i in range(3)])
+        self.along = opaque(mi.Float, np.array([float(props.get("thread_along", 0.3))]))
+        self.across = opaque(mi.Float, np.array([float(props.get("thread_across", 1.0))]))
         self.table, average = albedo_table(self)
         # f_ms = (1 - E(wi)) (1 - E(wo)) / (pi (1 - E_avg)); E_avg < 1 for alpha >= 0.05.
-        self.ms_scale = _opaque([1.0 / (dr.pi * max(1.0 - average, 1e-6))])
+        self.ms_scale = opaque(mi.Float, np.array([1.0 / (dr.pi * max(1.0 - average, 1e-6))]))
         flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
         self.m_components = [flags]
         self.m_flags = flags
