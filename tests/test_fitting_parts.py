@@ -398,7 +398,7 @@ def test_monte_carlo_error_of_few_averaged_points_takes_a_wider_scatter():
 def test_refinement_records_the_coordinates_its_noise_moves():
     """A coordinate whose Jacobian column is Monte-Carlo noise alone (the glass suite's bowl IOR at
     64 spp: columns of independent renders with cosine 0.01) has Newton steps of any length:
-    they are cut to the trust radius nearly every step (11 of 12 for the bowl), while measured
+    they are cut to the trust radius nearly every step (10 of 11 for the bowl), while measured
     coordinates' are not. The record survives a checkpoint."""
     from abs.fitting.optimisers.lm import LevenbergMarquardt, LMState
 

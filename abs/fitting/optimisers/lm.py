@@ -186,7 +186,7 @@ class LevenbergMarquardt(Optimiser):
         suite's spheres); one whose steps are clipped nearly every time is moved by the renders'
         Monte-Carlo noise (its curvature from two noisy Jacobians is noise, so the step is
         arbitrarily long): the refinement walks at random in it, and the walk's scatter is no
-        measure of its error (the bowl of the glass suite: IOR 1.733 +- 0.014 for 1.52, 11 of 12
+        measure of its error (the bowl of the glass suite: IOR 1.733 +- 0.014 for 1.52, 10 of 11
         steps clipped). ``None`` without Gauss-Newton steps or their record.
         """
         solver = state.solver or LMState()
