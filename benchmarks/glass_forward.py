@@ -49,8 +49,11 @@ def render_case(case, ior: float, cameras, spp: int, renderer: str, work: Path) 
     path = work / f"{case.name}-{ior}.toml"
     path.write_text(_scene_text(case.mesh, [ior] * 3, case.absorption_per_m, case.env_scale))
     compiled = compile_scene(load_scene(path))
-    draw = (lambda cam, seed: mitsuba_photograph(compiled, cam, spp, seed)) if renderer == "mitsuba" else \
-        (lambda cam, seed: compiled.render(cam, spp=spp, seed=seed + 7).numpy())
+    def draw(camera, seed: int) -> np.ndarray:
+        if renderer == "mitsuba":
+            return mitsuba_photograph(compiled, camera, spp, seed)
+        return compiled.render(camera, spp=spp, seed=seed + 7).numpy()
+
     return np.array([[draw(cam, 100 * v + s) for s in (1, 2)] for v, cam in enumerate(cameras)])
 
 
@@ -62,7 +65,8 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--case", default="bowl-1.52")
-    parser.add_argument("--iors", default="1.733", help="IORs besides the truth for abs, comma-separated")
+    parser.add_argument("--iors", default="1.733",
+                        help="IORs besides the truth for abs, comma-separated")
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--width", type=int, default=120)
     parser.add_argument("--height", type=int, default=100)
@@ -78,8 +82,8 @@ def main() -> None:
     truth = args.work / f"{case.name}-truth.toml"
     truth.write_text(_scene_text(case.mesh, [case.ior] * 3, case.absorption_per_m, case.env_scale))
     views = place_cameras(compile_scene(load_scene(truth)), args.views, args.width, args.height)
-    cameras = [Camera(np.asarray(v["K"]), np.asarray(v["R"]), np.asarray(v["t"]), args.width, args.height)
-               for v in views]
+    cameras = [Camera(np.asarray(v["K"]), np.asarray(v["R"]), np.asarray(v["t"]), args.width,
+                      args.height) for v in views]
 
     def small(images: np.ndarray) -> np.ndarray:
         return np.array([[downsample(i, args.downsample) for i in pair] for pair in images])
@@ -97,7 +101,8 @@ def main() -> None:
         var = args.sigma ** 2
         row = {"ior": ior,
                "cross_seed_vs_mitsuba": [cross_seed(a, m) / var for a, m in zip(images, reference)],
-               "same_seed_vs_mitsuba": [float(np.sum((a[0] - m[0]) ** 2)) / var for a, m in zip(images, reference)]}
+               "same_seed_vs_mitsuba": [float(np.sum((a[0] - m[0]) ** 2)) / var
+                                        for a, m in zip(images, reference)]}
         if photographs is not None:
             row["objective_vs_capture"] = [cross_seed(a, np.stack([p, p])) / var / 2
                                            for a, p in zip(images, photographs)]

@@ -82,7 +82,8 @@ def test_a_parameter_the_renders_noise_moved_is_announced_once_the_spheres_are_n
     bowl = _summary()
     bowl["parameters"]["glass.ior"] = {"value": [1.7334] * 3, "stderr": [0.0141] * 3,
                                        "refinement_limited": [0.9167] * 3}
-    bowl["parameters"]["glass.absorption"] = {"value": [7.589, 1.995, 0.449], "stderr": [2.59, 2.21, 1.96],
+    bowl["parameters"]["glass.absorption"] = {"value": [7.589, 1.995, 0.449],
+                                              "stderr": [2.59, 2.21, 1.96],
                                               "refinement_limited": [0.9167, 1.0, 1.0]}
     walks = [c for c in run_checks(bowl, BOUNDS, KINDS) if "random walk" in c]
     # The tied IOR once; the absorptions within two standard errors of 0 are left to the others.
@@ -91,13 +92,15 @@ def test_a_parameter_the_renders_noise_moved_is_announced_once_the_spheres_are_n
     # Its rerun walked to 1.071 +- 0.024 with 9 of 12 steps cut.
     bowl["parameters"]["glass.ior"] = {"value": [1.0707] * 3, "stderr": [0.024] * 3,
                                        "refinement_limited": [0.75] * 3}
-    assert any(c.startswith("glass.ior = 1.071 +- 0.024: in 75%") for c in run_checks(bowl, BOUNDS, KINDS))
+    checks = run_checks(bowl, BOUNDS, KINDS)
+    assert any(c.startswith("glass.ior = 1.071 +- 0.024: in 75%") for c in checks), checks
 
     sphere = _summary()
     sphere["parameters"]["glass.ior"]["refinement_limited"] = [0.25] * 3
     sphere["parameters"]["glass.absorption"]["refinement_limited"] = [0.36, 0.36, 0.55]
     assert run_checks(sphere, BOUNDS, KINDS) == []
     clear = _summary()
-    clear["parameters"]["glass.absorption"] = {"value": [0.0009, 0.0086, 0.0086], "stderr": [0.11, 0.11, 0.1],
+    clear["parameters"]["glass.absorption"] = {"value": [0.0009, 0.0086, 0.0086],
+                                               "stderr": [0.11, 0.11, 0.1],
                                                "refinement_limited": [0.92, 0.92, 0.92]}
     assert not any("random walk" in c for c in run_checks(clear, BOUNDS, KINDS))

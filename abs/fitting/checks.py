@@ -2,13 +2,14 @@
 
 A least-squares fit always returns numbers. These checks read the fit's own summary for the signs
 that those numbers are not a solution: a direction the photographs do not constrain (the Laplace
-curvature is singular there) or constrain so loosely that the value is not measured, a parameter pinned at a bound or outside the range its material can
-physically have (a glass IOR of 2.18 is no glass; a fit there found a wrong basin), a parameter
-that the renders' Monte-Carlo noise rather than the photographs moved (its refinement steps cut to
-the trust radius nearly every time), two parameters that trade off almost perfectly, and a holdout residual that stays far above the photographs'
-noise (the model leaves out physics, or the fit stopped in a wrong minimum). They are written to
-``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the report, as
-:mod:`abs.sampling.checks` does for posteriors.
+curvature is singular there) or constrain so loosely that the value is not measured, a parameter
+pinned at a bound or outside the range its material can physically have (a glass IOR of 2.18 is
+no glass; a fit there found a wrong basin), a parameter that the renders' Monte-Carlo noise rather
+than the photographs moved (its refinement steps cut to the trust radius nearly every time), two
+parameters that trade off almost perfectly, and a holdout residual that stays far above the
+photographs' noise (the model leaves out physics, or the fit stopped in a wrong minimum). They
+are written to ``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the
+report, as :mod:`abs.sampling.checks` does for posteriors.
 """
 
 from __future__ import annotations
@@ -80,7 +81,8 @@ def _noise_walk(name: str, entry: Mapping, values: np.ndarray, stderr: Sequence,
         flagged.append(i)
     if not flagged:
         return []
-    tied = len(values) > 1 and len(flagged) == len(values) and np.ptp(values) == 0 and np.ptp(shares) == 0
+    tied = (len(values) > 1 and len(flagged) == len(values) and np.ptp(values) == 0
+            and np.ptp(shares) == 0)
     labels = [(name, 0)] if tied else [(f"{name}[{i}]", i) for i in flagged]
     return [f"{label} = {values[i]:.4g} +- {stderr[i]:.2g}: in {shares[i]:.0%} of the refinement's "
             "steps the Gauss-Newton step was longer than its trust radius, so the renders' "
