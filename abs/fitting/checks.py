@@ -42,7 +42,8 @@ TRADE_OFF_CORRELATION = 0.98
 #: standard deviation ``s`` typical steps exceeds a radius of one that often only for ``s`` of 2.3
 #: or more. Glass suite (120x100 compared at 60x50, 64 spp, 16 steps; counted on the benchmark's
 #: traces): the spheres' IORs 1-3 of 11 steps, their absorptions clear of the bound 2-6 of 11; the
-#: bowl's IOR 10 of 11 (1.733 +- 0.014 for 1.52) and 9 of 12 in a rerun (1.071 +- 0.024).
+#: bowl's IOR 10 of 11 (1.733 +- 0.014 for 1.52) and 9 of 12 in a rerun (1.071 +- 0.024). The
+#: spheres rerun with the record: IORs 1-3 of 12, absorptions clear of the bound 2-4 of 12.
 NOISE_WALK_SHARE = 2.0 / 3.0
 
 # How many standard errors from a finite bound a value must be for the noise-walk check: a walk
