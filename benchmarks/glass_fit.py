@@ -137,7 +137,9 @@ def run_case(case: Case, work: Path, args) -> dict:
         rows[name] = {"value": value.tolist(), "stderr": [None if not np.isfinite(s) else s for s in stderr],
                       "truth": truth.tolist(), "error": (value - truth).tolist(),
                       "covered_2se": [bool(abs(v - t) <= 2 * s) if np.isfinite(s) else False
-                                      for v, t, s in zip(value, truth, stderr)]}
+                                      for v, t, s in zip(value, truth, stderr)],
+                      # The refinement's steps cut to the trust radius (the noise-walk check's).
+                      "refinement_limited": entry.get("refinement_limited")}
     return {"case": case.name, "mesh": case.mesh, "parameters": rows, "checks": summary["checks"],
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,

@@ -62,6 +62,7 @@ class FitResult:
     image_noise: float | None = None
     checks: list[str] = field(default_factory=list)
     scan: dict | None = None
+    limited: dict[str, np.ndarray] | None = None
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -73,6 +74,10 @@ class FitResult:
                      "unit": unit, "initial": self.initial[name].tolist()}
             if self.truth and name in self.truth:
                 entry["truth"] = list(self.truth[name])
+            if self.limited is not None:
+                # Share of the refinement's steps (after its first quarter) cut to the trust
+                # radius, per component: near 1, the renders' noise moved it (checks.py).
+                entry["refinement_limited"] = [round(float(x), 4) for x in self.limited[name]]
             parameters[name] = entry
         corr = np.where(np.isfinite(self.uncertainty.correlation), self.uncertainty.correlation, np.nan)
         return {
@@ -219,6 +224,9 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
         uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter))
 
+    limited = optimiser.limited_steps(state)
+    limited = None if limited is None or not len(limited) else vector.split(np.mean(limited, axis=0))
+
     m_before, m_after = _metrics(full.observations, before), _metrics(full.observations, after)
     metrics = {key: {"before": m_before[key], "after": m_after[key]} for key in m_before}
     # The noise a perfect model would leave: the photographs' and the renderings' own, on the
@@ -233,7 +241,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
                        metrics, method, state.iteration, counter.renders, counter.samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
-                       scan=scans)
+                       scan=scans, limited=limited)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)

@@ -112,6 +112,12 @@ class Optimiser(abc.ABC):
         holds few (see :func:`abs.fitting.laplace.with_monte_carlo_error`); ``None``: use those."""
         return None
 
+    def limited_steps(self, state: OptimizerState) -> np.ndarray | None:
+        """Bool (K, P): per step of the averaging phase and coordinate, whether the optimiser's
+        own step was cut to a trust radius (read by :func:`abs.fitting.checks.run_checks` through
+        ``fit.json``); ``None`` when the optimiser keeps no such record."""
+        return None
+
 
 def register(name: str):
     """Class decorator: register an :class:`Optimiser` subclass under ``name`` (its file's
