@@ -15,7 +15,7 @@ from abs.acquisition.blur import PIXEL_FOOTPRINT_VARIANCE_PX2, processing_blur
 from abs.acquisition.build import build_capture
 from abs.acquisition.camera_file import CameraModel
 from abs.acquisition.demosaic import cfa_masks, demosaic_bilinear
-from abs.acquisition.undistort import (pinhole_K, superpixel_camera, undistort_image,
+from abs.acquisition.undistort import (pinhole_K, remap_bilinear, superpixel_camera,
                                        undistortion_maps)
 from abs.errors import CaptureError
 from abs.io.capture import load_capture, save_capture
@@ -57,6 +57,18 @@ def test_processing_blur_without_distortion_is_the_demosaic_kernels():
     np.testing.assert_allclose(processing_blur(cam, half, "superpixel"), 0.0)
 
 
+def test_tiles_measure_what_the_whole_frame_does():
+    """A large sensor is measured on 3 x 3 tiles (memory): the same blur as the whole frame."""
+    K_big = np.array([[700.0, 0, 599.5], [0, 700.0, 449.5], [0, 0, 1]])
+    for method, size in (("bilinear", (1200, 900)), ("superpixel", (1200, 900)), (None, (1200, 900))):
+        cam = CameraModel(*size, K_big, DIST, np.eye(3), np.zeros(3))
+        built = superpixel_camera(cam) if method == "superpixel" else cam
+        K_new = pinhole_K(built)
+        whole = processing_blur(cam, K_new, method)
+        tiled = processing_blur(cam, K_new, method, whole_frame_px=100_000)
+        np.testing.assert_allclose(tiled, whole, atol=0.005, err_msg=str(method))
+
+
 def test_processing_blur_explains_what_the_pipeline_does_to_fine_detail():
     """A smooth pattern of 5-10 pixel periods, mosaiced, demosaiced and undistorted by the build's
     own functions, against the same pattern sampled exactly at the undistorted pixels: blurred by
@@ -75,8 +87,8 @@ def test_processing_blur_explains_what_the_pipeline_does_to_fine_detail():
     v, u = np.mgrid[0:96, 0:128].astype(np.float64)
     plane = pattern(u, v)
     mosaic = np.sum(np.repeat(plane[..., None], 3, -1) * cfa_masks(plane.shape, "RGGB"), -1)
-    built = undistort_image(demosaic_bilinear(mosaic, "RGGB", np.float64), cam, K_new, np.float64)
     map_x, map_y = undistortion_maps(cam, K_new)
+    built = remap_bilinear(demosaic_bilinear(mosaic, "RGGB", np.float64), map_x, map_y, np.float64)
     exact = pattern(map_x.astype(np.float64), map_y.astype(np.float64))
     sigma = processing_blur(cam, K_new)
     inner = (slice(8, -8), slice(8, -8))

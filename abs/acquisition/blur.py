@@ -14,10 +14,13 @@ parameters then make up for the lost contrast (glass absorption came out several
 high in the end-to-end benchmark, docs/acquisition.md).
 
 The variances are measured, not derived: images of the sensor sites' coordinates ``x``, ``x^2``
-(and ``y``, ``y^2``) are pushed through the build's own demosaicing and undistortion, in float64,
-and ``E[x^2] - E[x]^2`` is read off per pixel and channel. So every detail of the pipeline counts
-(the CFA pattern's phase, which sites a superpixel averages, the undistortion's zoom and its
-fractional sample positions), and a change to the pipeline changes the blur with it.
+(and ``y``, ``y^2``) are pushed through the build's own demosaicing and undistortion's bilinear
+resampling, in float64, and ``E[x^2] - E[x]^2`` is read off per pixel and channel. So every
+detail of the pipeline counts (the CFA pattern's phase, which sites a superpixel averages, the
+undistortion's zoom and its fractional sample positions), and a change to the pipeline changes
+the blur with it. Photographs of more than 2 megapixels are measured on 3 x 3 tiles of 256 x 256
+sensor pixels spread over the frame (the built pixels that sample them), not on the whole frame,
+whose float64 coordinate images would take gigabytes for a 24-megapixel sensor.
 
 In the capture's pixels (``s`` of them per sensor pixel: ``f_new / f``, about 1 for bilinear, 1/2
 for superpixels) the blur beyond the renderer's footprint is::
@@ -37,7 +40,7 @@ import numpy as np
 
 from abs.acquisition.camera_file import CameraModel
 from abs.acquisition.demosaic import SUPERPIXEL_FROM_FULL, demosaic
-from abs.acquisition.undistort import superpixel_camera, undistort_image, undistortion_maps
+from abs.acquisition.undistort import remap_bilinear, superpixel_camera, undistortion_maps
 
 __all__ = ["PIXEL_FOOTPRINT_VARIANCE_PX2", "processing_blur"]
 
@@ -45,13 +48,31 @@ __all__ = ["PIXEL_FOOTPRINT_VARIANCE_PX2", "processing_blur"]
 #: radius 1 pixel (abs.render.integrator; tests/test_acquisition_blur.py checks the two agree).
 PIXEL_FOOTPRINT_VARIANCE_PX2 = 1.0 / 6.0
 
-# Pixels whose bilinear samples come from this close to the sensor's edge are left out: there the
-# demosaic's reflected border and the remap's constant border break "weights sum to one".
+# Built pixels whose bilinear samples come from this close to the edge of the sensor (or of a
+# tile) are left out: there the demosaic's reflected border and the resampling's constant border
+# break "weights sum to one".
 _MARGIN_PX = 2.0
+# Above this many sensor pixels, tiles of this size (even: the CFA's phase is kept) are measured.
+_WHOLE_FRAME_PX = 2_000_000
+_TILE_PX = 256
+# cv2.remap takes maps of fewer than 32767 columns: scattered samples go in rows of this length.
+_ROW = 1024
+
+
+def _tiles(height: int, width: int, whole_frame_px: int) -> list[tuple[int, int, int, int]]:
+    """The sensor regions measured, ``(y0, y1, x0, x1)``: the whole frame, or 3 x 3 tiles of
+    ``_TILE_PX`` spread evenly over it, their corners even (the CFA's phase kept)."""
+    if height * width <= whole_frame_px or min(height, width) < _TILE_PX:
+        return [(0, height, 0, width)]
+
+    def starts(n):
+        return [2 * (int(round(k * (n - _TILE_PX) / 2)) // 2) for k in range(3)]
+
+    return [(y, y + _TILE_PX, x, x + _TILE_PX) for y in starts(height) for x in starts(width)]
 
 
 def processing_blur(camera: CameraModel, K_new: np.ndarray, method: str | None = "bilinear",
-                    pattern: str = "RGGB") -> np.ndarray:
+                    pattern: str = "RGGB", whole_frame_px: int = _WHOLE_FRAME_PX) -> np.ndarray:
     """Standard deviation per R, G, B (capture pixels) of the Gaussian blur that demosaicing by
     ``method`` and undistortion to ``K_new`` add beyond a pixel's footprint (module docstring).
 
@@ -66,38 +87,59 @@ def processing_blur(camera: CameraModel, K_new: np.ndarray, method: str | None =
         ``bilinear`` or ``superpixel`` (:data:`abs.acquisition.demosaic.DEMOSAIC_METHODS`);
         ``None`` for photographs that are RGB already (linear EXR frames: undistortion only).
     pattern : str
-        The Bayer pattern (the blur of bilinear demosaicing does not depend on it; the
-        superpixels' does not either; given for the sites' exact positions).
+        A Bayer pattern: the blur does not depend on which (each colour's sites form the same
+        lattice up to a shift), but the demosaic needs one.
+    whole_frame_px : int
+        Sensors of more pixels are measured on tiles (module docstring).
 
     Returns
     -------
     ndarray, shape (3,)
         Pixels of the built image, >= 0.
+
+    Raises
+    ------
+    ValueError
+        When no built pixel samples the sensor at least two pixels inside its edges.
     """
     h, w = camera.height, camera.width
-    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
     superpixel = method == "superpixel"
     built = superpixel_camera(camera) if superpixel else camera
-
-    def through(image):
-        rgb = (np.repeat(image[..., None], 3, axis=-1) if method is None
-               else demosaic(image, pattern, method, np.float64))
-        return undistort_image(rgb, built, K_new, np.float64)
-
-    variance = 0.0
-    for coordinate in (u, v):
-        mean = through(coordinate)
-        variance = variance + (through(coordinate * coordinate) - mean * mean) / 2.0
-    # Where each built pixel samples, in sensor pixels: inside by the margin?
-    map_x, map_y = (m.astype(np.float64) for m in undistortion_maps(built, K_new))
+    map_x, map_y = undistortion_maps(built, K_new)
+    # Where each built pixel samples, in sensor pixels.
+    source_x, source_y = map_x.astype(np.float64), map_y.astype(np.float64)
     if superpixel:
         full = np.linalg.inv(SUPERPIXEL_FROM_FULL)
-        map_x, map_y = full[0, 0] * map_x + full[0, 2], full[1, 1] * map_y + full[1, 2]
-    inside = ((map_x >= _MARGIN_PX) & (map_x <= w - 1 - _MARGIN_PX)
-              & (map_y >= _MARGIN_PX) & (map_y <= h - 1 - _MARGIN_PX))
-    if not inside.any():
-        raise ValueError(f"the {w}x{h} camera has no pixel {_MARGIN_PX:g} pixels inside its frame")
-    var_sensor = variance[inside].mean(axis=0)
+        source_x, source_y = full[0, 0] * source_x + full[0, 2], full[1, 1] * source_y + full[1, 2]
+    variances = []
+    for y0, y1, x0, x1 in _tiles(h, w, whole_frame_px):
+        inside = ((source_x >= x0 + _MARGIN_PX) & (source_x <= x1 - 1 - _MARGIN_PX)
+                  & (source_y >= y0 + _MARGIN_PX) & (source_y <= y1 - 1 - _MARGIN_PX))
+        n = int(inside.sum())
+        if n == 0:
+            continue
+        # The tile's samples, in the coordinates of the tile's (demosaiced) image, in rows.
+        scale = 2 if superpixel else 1
+        rows = -(-n // _ROW)
+        mx, my = (np.zeros(rows * _ROW, np.float32) for _ in range(2))
+        mx[:n], my[:n] = map_x[inside] - x0 / scale, map_y[inside] - y0 / scale
+        mx, my = mx.reshape(rows, _ROW), my.reshape(rows, _ROW)
+        v, u = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+
+        def through(image):
+            rgb = (np.repeat(image[..., None], 3, axis=-1) if method is None
+                   else demosaic(image, pattern, method, np.float64))
+            return remap_bilinear(rgb, mx, my, np.float64).reshape(-1, 3)[:n]
+
+        variance = 0.0
+        for coordinate in (u, v):
+            mean = through(coordinate)
+            variance = variance + (through(coordinate * coordinate) - mean * mean) / 2.0
+        variances.append(variance)
+    if not variances:
+        raise ValueError(f"no pixel of the undistorted {built.width}x{built.height} image samples "
+                         f"the {w}x{h} sensor {_MARGIN_PX:g} pixels inside its edges")
+    var_sensor = np.concatenate(variances).mean(axis=0)
     s = float(K_new[0, 0]) / float(camera.K[0, 0])
     extra = s * s * var_sensor + PIXEL_FOOTPRINT_VARIANCE_PX2 * (s * s - 1.0)
     return np.sqrt(np.maximum(extra, 0.0))

@@ -23,7 +23,7 @@ camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture
 nonzero where pixels are compared; it is undistorted with the image (nearest neighbour, and
 pixels that fall outside the original frame are left out) and written as the view's mask.
 The capture's ``blur_px`` is the blur that this demosaicing and undistortion add
-(:func:`abs.acquisition.blur.processing_blur`, averaged over the views' cameras), so that fits
+(:func:`abs.acquisition.blur.processing_blur`, its variance averaged over the views), so that fits
 blur their renderings alike.
 """
 
@@ -175,7 +175,7 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                           f"{', '.join(DEMOSAIC_METHODS)}, got "
                                                           f"{demosaic!r}")
     superpixel = demosaic == "superpixel"
-    views, images, masks, merges, blurs = [], {}, {}, {}, {}
+    views, images, masks, merges, blurs, blur_keys = [], {}, {}, {}, {}, []
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
         if not isinstance(entry, dict):
@@ -206,7 +206,11 @@ def build_capture(build_file: str | Path, out: str | Path,
         raw = any(Path(f).suffix.lower() != ".exr" for f in entry["frames"])
         key = (entry["camera"], raw)
         if key not in blurs:
-            blurs[key] = processing_blur(cam, K_new, demosaic if raw else None, cfa or "RGGB")
+            try:
+                blurs[key] = processing_blur(cam, K_new, demosaic if raw else None)
+            except ValueError as exc:
+                raise InputError(source, f"{field}.camera", f"{entry['camera']}: {exc}") from None
+        blur_keys.append(key)
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
@@ -218,5 +222,7 @@ def build_capture(build_file: str | Path, out: str | Path,
         merges[entry["name"]] = merged
         if progress is not None:
             progress(1)
-    blur_px = np.mean(list(blurs.values()), axis=0) if blurs else np.zeros(3)
+    # One blur per capture: the views' variances averaged (variance is what sets the blur).
+    blur_px = (np.sqrt(np.mean([np.square(blurs[k]) for k in blur_keys], axis=0)) if blur_keys
+               else np.zeros(3))
     return save_capture(out, views, images, masks or None, blur_px=blur_px), merges

@@ -18,7 +18,8 @@ from abs.acquisition.camera_file import CameraModel
 from abs.acquisition.demosaic import superpixel_K
 from abs.errors import InputError
 
-__all__ = ["pinhole_K", "superpixel_camera", "undistort_image", "undistort_mask", "undistortion_maps"]
+__all__ = ["pinhole_K", "remap_bilinear", "superpixel_camera", "undistort_image",
+           "undistort_mask", "undistortion_maps"]
 
 
 def superpixel_camera(camera: CameraModel) -> CameraModel:
@@ -57,16 +58,21 @@ def undistortion_maps(camera: CameraModel, K_new: np.ndarray) -> tuple[np.ndarra
                                        (camera.width, camera.height), cv2.CV_32FC1)
 
 
-def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray,
-                    dtype=np.float32) -> np.ndarray:
-    """Resample ``image`` (H, W[, C], float) as seen by the pinhole ``K_new`` (bilinear), as
-    ``dtype`` (float64 for exact moments, :mod:`.blur`)."""
+def remap_bilinear(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarray,
+                   dtype=np.float32) -> np.ndarray:
+    """``image`` (H, W[, C]) sampled bilinearly at ``(map_x, map_y)`` (pixels, float32 arrays of
+    the output's shape), 0 outside, as ``dtype`` (float64 for exact moments, :mod:`.blur`):
+    undistortion's resampling."""
+    return cv2.remap(np.asarray(image, dtype), map_x, map_y, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT)
+
+
+def undistort_image(image: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> np.ndarray:
+    """Resample ``image`` (H, W[, C], float) as seen by the pinhole ``K_new`` (bilinear)."""
     if image.shape[:2] != (camera.height, camera.width):
         raise ValueError(f"image is {image.shape[1]}x{image.shape[0]}, camera "
                          f"{camera.width}x{camera.height}")
-    map1, map2 = undistortion_maps(camera, K_new)
-    return cv2.remap(np.asarray(image, dtype), map1, map2, cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_CONSTANT)
+    return remap_bilinear(image, *undistortion_maps(camera, K_new))
 
 
 def undistort_mask(mask: np.ndarray, camera: CameraModel, K_new: np.ndarray) -> np.ndarray:

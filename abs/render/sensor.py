@@ -27,13 +27,15 @@ linear signal (filter cross-talk, white balance, its colour-correction matrix), 
 curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
 ``G_c *`` is a convolution with a Gaussian of standard deviation ``blur_px[c]``
 (:func:`blur_kernel`): a capture build demosaics and resamples the photographs' camera RGB, so
-the blur acts after the colour mixing; it is left out entirely when every ``blur_px`` is 0.
+the blur acts after the colour mixing, and demosaicing works on linear values (a camera's own
+processor demosaics its raw data before any tone curve), so before the response. It is left out
+entirely when every ``blur_px`` is 0.
 
 Every operation is exact at its null value (``dc = df = 0``: the displacement is ``-0``, the
 sample sits on the pixel centre with Catmull-Rom weights 0, 1, 0, 0, ``L * 1 + L' * 0 ...``; ``k = 0``: ``L * 1``;
 ``s = 0``: ``+ 0``; ``M = I``: ``1 x_c + 0 x_j + 0 x_k``, where the products with 0 are +-0 and adding them to
 ``x_c`` leaves it unchanged for any finite ``x``; ``gamma = 1``: ``x * exp(0)``), so a sensor at
-its null values returns the rendering bit for bit.
+its null values returns the rendering bit for bit on a camera without ``blur_px``.
 
 Downsampled cameras (``Camera.block > 1``) compare box averages of fine photograph pixels, each
 vignetted at its own centre; the falloff is linear in ``k``, so the block average of ``r^2`` and
@@ -102,6 +104,16 @@ def radial_moments(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         return a.reshape(camera.height, b, camera.width, b).mean(axis=(1, 3))
 
     return block_mean(r2), block_mean(r2 * r2)
+
+
+def _lanes(camera: Camera):
+    """``(width, height, pixel, channel)`` of the (H, W, 3) image's lanes as ``Int32``: the
+    camera's numbers enter as opaque values, not literals, so that another view, size or block
+    reuses the compiled kernels (tests/test_jit.py)."""
+    h, w = camera.height, camera.width
+    lane = dr.arange(mi.UInt32, h * w * 3)
+    pixel = mi.Int32(lane // 3)
+    return dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h), pixel, mi.Int32(lane) - 3 * pixel
 
 
 def blur_kernel(sigma_px: float) -> np.ndarray:
@@ -205,13 +217,8 @@ class Sensor:
         """The (H, W, 3) image ``flat`` as the photographs' camera (``intrinsics_offset``) sees it:
         each pixel interpolated at ``u + d(u)`` (module docstring) by Catmull-Rom cubics,
         indices clamped to the frame."""
-        h, w, b = camera.height, camera.width, camera.block
-        # The camera's numbers enter as opaque values, not literals: another view, size or
-        # block then reuses the compiled kernels (tests/test_jit.py).
-        width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
-        lane = dr.arange(mi.UInt32, h * w * 3)
-        pixel = mi.Int32(lane // 3)
-        channel = mi.Int32(lane) - 3 * pixel
+        b = camera.block
+        width, height, pixel, channel = _lanes(camera)
         u = mi.Float(pixel % width)
         v = mi.Float(pixel // width)
         per_block = dr.opaque(mi.Float, 1.0 / b)
@@ -255,11 +262,7 @@ class Sensor:
             pad = radius - len(k) // 2
             table[c, pad:pad + len(k)] = k
         weights = opaque(mi.Float, table.ravel().astype(np.float32))
-        h, w = camera.height, camera.width
-        width, height = dr.opaque(mi.Int32, w), dr.opaque(mi.Int32, h)
-        lane = dr.arange(mi.UInt32, h * w * 3)
-        pixel = mi.Int32(lane // 3)
-        channel = mi.Int32(lane) - 3 * pixel
+        width, height, pixel, channel = _lanes(camera)
         x, y = pixel % width, pixel // width
         for along_x in (True, False):
             out = None

@@ -80,6 +80,9 @@ class Effect(ABC):
         (:func:`abs.diagnosis.select.compare`), as those of effects that change the sampling are
         (``zero_null_derivative`` ones): its parameter reweights each sample by its own amount,
         so the two models' noise no longer cancels in a paired difference of shared seeds.
+        BIC still compares the fits' training errors of shared seeds; the effect's extra
+        per-sample variance can only raise its model's error there, so that test errs towards
+        rejecting it.
     """
 
     name: ClassVar[str]

@@ -187,7 +187,10 @@ class LevenbergMarquardt(Optimiser):
         Monte-Carlo noise (its curvature from two noisy Jacobians is noise, so the step is
         arbitrarily long): the refinement walks at random in it, and the walk's scatter is no
         measure of its error (the bowl of the glass suite: IOR 1.733 +- 0.014 for 1.52, 10 of 11
-        steps clipped). ``None`` without Gauss-Newton steps or their record.
+        steps clipped). Steps reached while still travelling count too, although the averaged
+        points leave them out: a coordinate clipped at nearly every step is not measured either
+        way (still travelling when the refinement ended, or walking at random). ``None`` without
+        Gauss-Newton steps or their record.
         """
         solver = state.solver or LMState()
         refinement = solver.refinement
