@@ -118,7 +118,7 @@ def _check_holdout(value: Any, source: Path | None, field: str) -> bool:
 
 
 def _check_blur(value: Any, source: Path | None, field: str) -> tuple[float, float, float]:
-    # Beyond 10 pixels a "processing blur" is a mistake (pixels, not micrometres?), not a blur.
+    # Demosaicing and resampling blur by about a pixel: beyond 10 the value is a mistake (units?).
     blur = _matrix(value, (3,), source, field)
     if np.any(blur < 0) or np.any(blur > 10):
         raise CaptureError(source, field, f"expected 3 standard deviations in [0, 10] pixels "

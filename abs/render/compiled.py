@@ -436,7 +436,8 @@ class CompiledScene:
         if not differenced:
             return 1
         sides = len(self._difference_signs(differenced)[1])
-        traced = any(np.any(np.asarray(t) != 0) for n, t in tangents.items() if n not in differenced)
+        traced = any(np.any(np.asarray(t) != 0) for n, t in tangents.items()
+                     if n not in differenced)
         return sides + (1 if traced or image_needed or sides < 2 else 0)
 
     def _differenced(self, tangents: dict, differences: bool) -> dict:
