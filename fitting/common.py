@@ -25,7 +25,8 @@ def parser(doc: str) -> argparse.ArgumentParser:
     return p
 
 
-def fit_stage(scene, capture: Path, names: list[str], settings, out: Path) -> dict:
+def fit_stage(scene, capture: Path, names: list[str], settings, out: Path,
+              initial: dict | None = None) -> dict:
     """Fit ``names`` with ``settings``, write the fit folder ``out`` and print the result.
 
     Parameters
@@ -38,6 +39,8 @@ def fit_stage(scene, capture: Path, names: list[str], settings, out: Path) -> di
         Parameters to fit.
     settings : abs.FitSettings
     out : Path
+    initial : dict, optional
+        Starting values by parameter name instead of the scene's.
         Fit folder: fit.json, the fitted scene.toml, renders/ and report/.
 
     Returns
@@ -50,7 +53,7 @@ def fit_stage(scene, capture: Path, names: list[str], settings, out: Path) -> di
 
     print(f"fitting {', '.join(names)} -> {out}", flush=True)
     result = abs.fit(scene, capture, names, settings, on_iteration=progress,
-                     truth=read_truth(capture, names))
+                     truth=read_truth(capture, names), initial=initial)
     summary = write_fit_folder(out, scene, result)
     print("\n".join(summary_lines(summary)))
     print(f"wrote {out / 'fit.json'} and {out / 'report' / 'report.html'}", flush=True)

@@ -17,7 +17,6 @@ from abs.errors import SceneError
 from abs.render import PathTracer, compile_scene
 from abs.render.bsdfs.diffuse import DiffuseBSDF
 from abs.scene import load_scene, write_scene
-from conftest import assert_same_rendering
 from gradcheck import assert_gradients_agree, directional_gradient, gradient_setup
 
 W = H = 24
@@ -56,14 +55,23 @@ def _stock(compiled) -> mi.Scene:
     return mi.load_dict(d, optimize=False)
 
 
+def _same_model(image, reference):
+    """Two renders of the same model, one through Mitsuba's C++ ``diffuse`` and one through the
+    Python plugin: equal up to float round-off, which here is not quite bitwise (a CI run found
+    10 of 1728 values 2-7e-6 apart, relative: the two BSDFs' kernels are compiled separately and
+    may round or contract their arithmetic differently). A change of the model moves pixels by
+    orders more."""
+    np.testing.assert_allclose(image, reference, rtol=2e-5, atol=1e-7)
+
+
 def test_null_is_mitsubas_diffuse(setup):
     """At [0, 0] the plugin skips the lobes (unless the weights are attached to the AD graph);
-    with the lobes traced, weighted by 0, it renders the same bits."""
+    with the lobes traced, weighted by 0, it renders the same image."""
     compiled, camera, _ = setup
     assert compiled.get(NAME).tolist() == [0.0, 0.0]
     image = compiled.render(camera, spp=4, seed=2, max_depth=4).numpy()
     stock = PathTracer(max_depth=4).render(_stock(compiled), compiled.environment, camera, 4, 2)
-    assert_same_rendering(image, stock.numpy())
+    _same_model(image, stock.numpy())
     bsdfs = [s.bsdf() for s in compiled.mitsuba_scene.shapes() if isinstance(s.bsdf(), DiffuseBSDF)]
     assert len(bsdfs) == 2 and not any(b.lobes for b in bsdfs)
     for b in bsdfs:
@@ -74,7 +82,7 @@ def test_null_is_mitsubas_diffuse(setup):
         for b in bsdfs:
             b.parameters_changed([])
     assert not any(b.lobes for b in bsdfs)
-    assert_same_rendering(traced, stock.numpy())
+    _same_model(traced, stock.numpy())
     # and the weights change it: the check is not vacuous
     compiled.set(NAME, [0.3, 0.1])
     try:
