@@ -25,8 +25,9 @@ Why these settings:
   of the glass suite, started at IOR 1.75, ended at 1.646 ± 0.007 with no check). Short coarse
   fits from IORs across real glasses (1.45 to 1.75) end in their basins, and the full fit starts
   from the end point with the lowest two-seed objective averaged over fresh seed pairs at four
-  times the samples: one pair's objective at the coarse stage scatters by about its differences
-  between basins (sphere-1.47: 108, 62, 235, 395 at the four ends, the lowest at the wrong one).
+  times the samples: one pair's objective at the coarse stage scatters too much to compare ends
+  (sphere-1.47's four ends: 108, 62, 235, 395 from the short fits' own pair; 1.63, 1.62, 2.74,
+  5.90 averaged, which tells the two ends in the truth's basin from the two in others).
 
 What it assumes: geometry, cameras and the environment's shape are right; the glass's IOR lies
 in 1.4 to 1.8 (``--starts`` otherwise; ``--starts none`` starts at the scene's values, which then
@@ -130,11 +131,18 @@ def main(argv=None) -> int:
                    help="IORs of the short fits that choose the start (comma-separated), or "
                         "'none' to start at the scene's values")
     args = p.parse_args(argv)
+    starts = None
+    if args.starts != "none":
+        try:
+            starts = [float(x) for x in args.starts.split(",")]
+        except ValueError:
+            p.error(f"--starts: expected comma-separated IORs or 'none', got {args.starts!r}")
+        if not all(1.0 < x < 3.0 for x in starts):
+            p.error(f"--starts: IORs must lie between 1 and 3, got {args.starts!r}")
     scene = load_scene(args.scene)
     names = parameters(args.material, not args.no_scale)
     initial = None
-    if args.starts != "none":
-        starts = [float(x) for x in args.starts.split(",")]
+    if starts is not None:
         initial = best_start(scene, args.capture, args.material, not args.no_scale, starts)
     fit_stage(scene, args.capture, names, settings(args.material), args.out, initial=initial)
     return 0

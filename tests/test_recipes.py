@@ -24,6 +24,13 @@ def test_recipe_help(script):
     assert "When to use it" in done.stdout
 
 
+@pytest.mark.parametrize("starts", ["1.5,glass", "0.5,1.5", ""])
+def test_glass_recipe_refuses_bad_starts(tmp_path, starts):
+    done = _run(RECIPES / "glass_absorption_ior.py", tmp_path / "scene.toml", tmp_path,
+                "--out", tmp_path / "fit", "--starts", starts)
+    assert done.returncode == 2 and "--starts" in done.stderr, done.stderr
+
+
 def test_environment_scale_recipe(small_scene_dir, tmp_path):
     from abs.scene import load_scene, write_scene
     from abs.simulate import simulate_capture
