@@ -927,6 +927,18 @@ def _f(v, fmt="{:.3f}") -> str:
     return "-" if v is None else fmt.format(v)
 
 
+def _absorption_errors(x: dict) -> str:
+    """An end-to-end fit's absorption errors with their standard errors, 1/m."""
+    return ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
+                     zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
+
+
+def _scale_and_absorption_errors(x: dict) -> str:
+    """An end-to-end fit's relative scale error (± its standard error), then its absorption's."""
+    return (f"{100 * x['environment_scale_rel_error']:+.2f} % "
+            f"(± {100 * x['environment_scale_stderr']:.2f} %); " + _absorption_errors(x))
+
+
 def write_markdown(results: dict, path: Path) -> None:
     parts = results.get("parts", {})
     lines = ["# Acquisition benchmark", "",
@@ -1007,10 +1019,7 @@ def write_markdown(results: dict, path: Path) -> None:
                     f"| end to end, default scene, {cfg['views']} views {cfg['width']}x"
                     f"{cfg['height']} | {label}: environment.scale error; glass.absorption error "
                     f"(1/m, truth {e['truth']['glass.absorption']}) | "
-                    f"{100 * x['environment_scale_rel_error']:+.2f} % "
-                    f"(± {100 * x['environment_scale_stderr']:.2f} %); "
-                    + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
-                                zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
+                    + _scale_and_absorption_errors(x)
                     + f" | holdout RMSE {x['holdout_rmse_in_scene_units'].get('before', 0):.4f} -> "
                     f"{x['holdout_rmse_in_scene_units'].get('after', 0):.4f}{note} |")
     eb = parts.get("end_to_end_blur")
@@ -1024,11 +1033,7 @@ def write_markdown(results: dict, path: Path) -> None:
             lines.append(
                 f"| {'end to end, capture blur modelled (one run)' if label == 'simulate' else ''} "
                 f"| {label}: environment.scale error; glass.absorption error (1/m) | "
-                f"{100 * x['environment_scale_rel_error']:+.2f} % "
-                f"(± {100 * x['environment_scale_stderr']:.2f} %); "
-                + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
-                            zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
-                + f" | {notes.get(label, '')} |")
+                + _scale_and_absorption_errors(x) + f" | {notes.get(label, '')} |")
         lines.append("| | blur_px written by the builds (R, G, B) | bilinear "
                      + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["bilinear"]) + "; superpixel "
                      + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["superpixel"]) + " | |")
@@ -1039,9 +1044,7 @@ def write_markdown(results: dict, path: Path) -> None:
             lines.append(
                 f"| {'capture blur modelled, other truth renders' if key == '700' else ''} "
                 f"| built_from_raw, scene renders seeded {key}: glass.absorption error (1/m) | "
-                + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
-                            zip(x["glass_absorption_error"], x["glass_absorption_stderr"]))
-                + " | the renders behind the raw frames (500 elsewhere) |")
+                + _absorption_errors(x) + " | the renders behind the raw frames (500 elsewhere) |")
     for part, heading in (("end_to_end_replicates", "same, {n} more noise seeds"),
                           ("end_to_end_blur_replicates",
                            "capture blur modelled, {n} more noise seeds")):
@@ -1065,8 +1068,7 @@ def write_markdown(results: dict, path: Path) -> None:
             "| | built from linear EXR frames (no mosaic, no demosaic): environment.scale error; "
             "glass.absorption error (1/m) | "
             f"{100 * (ex['environment_scale'] - 1):+.2f} % (± {100 * ex['environment_scale_stderr']:.2f} %); "
-            + ", ".join(f"{v:+.2f} ± {se:.2f}" for v, se in
-                        zip(ex["glass_absorption_error"], ex["glass_absorption_stderr"]))
+            + _absorption_errors(ex)
             + " | isolates the resampling's share"
             + (f"; blur_px {ex['blur_px'][0]:.3f} modelled, 128 spp |" if "blur_px" in ex
                else " |"))
