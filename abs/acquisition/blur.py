@@ -111,6 +111,7 @@ def processing_blur(camera: CameraModel, K_new: np.ndarray, method: str | None =
     if superpixel:
         full = np.linalg.inv(SUPERPIXEL_FROM_FULL)
         source_x, source_y = full[0, 0] * source_x + full[0, 2], full[1, 1] * source_y + full[1, 2]
+    scale = 2 if superpixel else 1  # sensor pixels per pixel of the demosaiced image
     variances = []
     for y0, y1, x0, x1 in _tiles(h, w, whole_frame_px):
         inside = ((source_x >= x0 + _MARGIN_PX) & (source_x <= x1 - 1 - _MARGIN_PX)
@@ -119,7 +120,6 @@ def processing_blur(camera: CameraModel, K_new: np.ndarray, method: str | None =
         if n == 0:
             continue
         # The tile's samples, in the coordinates of the tile's (demosaiced) image, in rows.
-        scale = 2 if superpixel else 1
         rows = -(-n // _ROW)
         mx, my = (np.zeros(rows * _ROW, np.float32) for _ in range(2))
         mx[:n], my[:n] = map_x[inside] - x0 / scale, map_y[inside] - y0 / scale
