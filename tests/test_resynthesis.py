@@ -176,6 +176,7 @@ def test_a_sun_s_highlight_does_not_pull_the_fit(tmp_path):
     settings = dataclasses.replace(SETTINGS, light_grid=(7, 8))
     est = estimate(photo, mask, EditSettings())
     kept = resynthesis.fit_photograph(photo, mask, est, settings).trust
+    assert kept["highlight_pixels_left_out"] > 0
     np.testing.assert_allclose(kept["reflectance"], REFLECTANCE, rtol=0.3)
     ratio = np.asarray(kept["reflectance"]) / REFLECTANCE
     assert np.ptp(ratio) < 0.2 * ratio.mean()  # measured 0.14
@@ -244,6 +245,7 @@ def test_the_fit_recovers_the_sphere_s_reflectance_and_light(fitted):
     trust = scene.trust
     np.testing.assert_allclose(trust["reflectance"], REFLECTANCE, rtol=0.06)
     assert trust["scale"] == pytest.approx(1.0, abs=0.05)
+    assert trust["highlight_pixels_left_out"] == 0  # uniform light: no sun
     # The fitted model explains the photograph down to its noise (photograph 256 spp, fit 8 spp).
     assert trust["residual_rmse"] < 3.0 * trust["noise"]
     assert trust["residual_rmse"] < 0.5 * trust["initial_rmse"] or trust["initial_rmse"] < 0.05

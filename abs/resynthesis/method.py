@@ -10,7 +10,8 @@ renderer then explains the photograph, and the edit is a rendering:
    (:mod:`~abs.resynthesis.backdrop`).
 2. **Fit** (:func:`abs.fit`, Levenberg-Marquardt with Laplace errors): the current material's
    reflectance (``plastic``) and the environment's scale, for each candidate roughness; the
-   candidate with the smallest residual wins.
+   candidate with the smallest residual wins. The fit compares the matte less its outline and
+   less a sun's sharp highlight (:func:`fit_mask`).
 3. **Light.** The unseen part of the map (the backdrop stays as photographed) replaced by a
    smooth map fitted to the object as a light probe (:mod:`~abs.resynthesis.lighting`), starting
    from the scaled baseline map; then the material and scale fitted again under it. The residual
@@ -167,7 +168,8 @@ def fit_mask(mask: np.ndarray, rgb: np.ndarray | None = None,
     rgb : np.ndarray, optional
         ``(height, width, 3)`` the linear photograph; needed for the highlight test.
     highlight_factor : float, optional
-        Luminance over the median above which a pixel is a highlight; ``None``: keep them.
+        Luminance over the median that makes a pixel a highlight's core (its region reaches down
+        to a quarter of that); ``None``: keep every pixel.
     """
     inner = ndimage.binary_erosion(mask)
     inner = inner if inner.sum() >= max(16, mask.sum() // 4) else np.asarray(mask, bool)
@@ -336,7 +338,9 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
     level = float(np.mean(luminance(rgb)[mask]))
     trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
                  relative_residual=trust["residual_rmse"] / max(level, 1e-12),
-                 fov_deg=syn.fov_deg)
+                 fov_deg=syn.fov_deg,
+                 highlight_pixels_left_out=int(fit_mask(mask).sum()
+                                               - fit_mask(mask, rgb, syn.highlight_factor).sum()))
     return FittedScene(view, (h, w), vertices, faces, fitted_env.astype(np.float32), trust)
 
 
