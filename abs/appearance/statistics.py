@@ -16,7 +16,8 @@ pixels of every object of class c in every characterisation image:
   differences between scenes do not enter them.
 
 Beside them, for the histogram-matching baselines the paper shows to fail: per channel, the
-histogram of log10 radiance over all object pixels (global) and per class (local).
+histogram of log10 radiance over all object pixels (global) and per class (local); and for the
+sensor step (:mod:`abs.appearance.sensor`), each image's means over a coarse grid of blocks.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from abs.appearance.geometry import Geometry
+from abs.appearance.sensor import block_means
 
 __all__ = ["Characterisation", "Accumulator", "bin_moments", "object_bins", "theta_edges",
            "HIST_EDGES", "LOG_FLOOR"]
@@ -68,6 +70,10 @@ class Characterisation:
         ``(n_classes, 3, n_hist)``.
     settings : dict
         How it was made (image size, spp, seed, environment).
+    blocks : np.ndarray or None
+        ``(n_scenes, g, g, 3)`` each scene's whole image (every pixel) averaged over a g x g grid
+        of equal blocks, linear radiance (:func:`abs.appearance.sensor.block_means`), for the
+        sensor step; None in files written before it existed.
     """
 
     renderer: str
@@ -84,6 +90,7 @@ class Characterisation:
     hist_global: np.ndarray
     hist_local: np.ndarray
     settings: dict = field(default_factory=dict)
+    blocks: np.ndarray | None = None
 
     @property
     def n_bins(self) -> int:
@@ -136,6 +143,7 @@ class Accumulator:
         self.sum_spread = np.zeros(shape + (3,))
         self.profiles: list[np.ndarray] = []
         self.profile_counts: list[np.ndarray] = []
+        self.blocks: list[np.ndarray] = []
         n_hist = len(HIST_EDGES) - 1
         self.hist_global = np.zeros((3, n_hist))
         self.hist_local = np.zeros((len(self.classes), 3, n_hist))
@@ -171,6 +179,7 @@ class Accumulator:
         with np.errstate(invalid="ignore", divide="ignore"):
             self.profiles.append(sums / counts[..., None])
         self.profile_counts.append(counts)
+        self.blocks.append(block_means(image))
 
     def finish(self, renderer: str, options: dict, design: str, settings: dict) -> Characterisation:
         """The :class:`Characterisation` of everything added."""
@@ -183,4 +192,4 @@ class Accumulator:
                                 alpha, lam, psi, self.n.astype(np.int64), np.array(self.profiles),
                                 np.array(self.profile_counts).astype(np.int64),
                                 self.hist_global.astype(np.int64), self.hist_local.astype(np.int64),
-                                dict(settings))
+                                dict(settings), np.array(self.blocks))
