@@ -59,11 +59,19 @@ def add_parser(sub) -> None:
     t.add_argument("--from", dest="source", type=Path, required=True, help="A's characterisation")
     t.add_argument("--to", dest="target", type=Path, required=True, help="B's characterisation")
     t.add_argument("--out", type=Path, required=True, help="output image (.exr)")
-    t.add_argument("--method", default="statistics",
-                   choices=("statistics", "histogram-global", "histogram-local"))
+    t.add_argument("--method", default="statistics", choices=tuple(_METHODS),
+                   help="statistics: the θ transfer (after the optional steps below); sensor: the "
+                        "sensor step alone; histogram-*: the paper's failing baselines "
+                        "(default %(default)s)")
     t.add_argument("--colour-matrix", default="none", choices=("none", "class", "global"),
                    help="colour-matrix step before the θ transfer (default %(default)s)")
     t.add_argument("--spread", action="store_true", help="also apply the spread term ψ")
+    t.add_argument("--shift", default="ratio", choices=("ratio", "additive"),
+                   help="how λ moves a bin's pixels: scaled (ratio) or shifted (additive) "
+                        "(default %(default)s)")
+    t.add_argument("--sensor", action="store_true",
+                   help="first the sensor step: vignetting, colour matrix and response fitted on "
+                        "both files' design block means (for a camera; docs/appearance.md)")
     t.add_argument("--target", dest="reference", type=Path,
                    help="B's own image of the scene: score the result against it")
     t.set_defaults(run=run_transfer)
@@ -192,29 +200,55 @@ def run_render(args) -> int:
     return 0
 
 
+def _statistics(image, geometry, source, target, args):
+    from abs.appearance import transfer
+    from abs.appearance.transfer import sensor_step
+
+    sensor = sensor_step(source, target) if args.sensor else False
+    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift, sensor)
+    return out, sensor
+
+
+def _sensor_only(image, geometry, source, target, args):
+    from abs.appearance import transfer
+    from abs.appearance.transfer import sensor_step
+
+    sensor = sensor_step(source, target)
+    return transfer(image, geometry, source, target, sensor=sensor, theta=False), sensor
+
+
+def _histogram(kind):
+    def run(image, geometry, source, target, args):
+        from abs.appearance.histogram import match_global, match_local
+
+        return {"global": match_global, "local": match_local}[kind](image, geometry, target), False
+    return run
+
+
+# --method: what makes the image look like the target's (each returns the image and the sensor
+# step it fitted, or False).
+_METHODS = {"statistics": _statistics, "sensor": _sensor_only,
+            "histogram-global": _histogram("global"), "histogram-local": _histogram("local")}
+
+
 def run_transfer(args) -> int:
-    from abs.appearance import read_characterisation, read_geometry, transfer
-    from abs.appearance.histogram import match_global, match_local
+    from abs.appearance import read_characterisation, read_geometry
     from abs.appearance.score import object_scores
     from abs.errors import InputError
     from abs.io.images import read_image, write_exr, write_png
 
+    if args.out.suffix.lower() != ".exr":
+        raise InputError(args.out, "--out", "expected an .exr file name")
     image = read_image(args.image)
     geometry = read_geometry(args.geometry, image.shape[:2])
     source, target = read_characterisation(args.source), read_characterisation(args.target)
-    if args.method == "statistics":
-        out = transfer(image, geometry, source, target, args.colour_matrix, args.spread)
-    elif args.method == "histogram-global":
-        out = match_global(image, geometry, target)
-    else:
-        out = match_local(image, geometry, target)
-    if args.out.suffix.lower() != ".exr":
-        raise InputError(args.out, "--out", "expected an .exr file name")
+    out, sensor = _METHODS[args.method](image, geometry, source, target, args)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_exr(args.out, out)
     write_png(args.out.with_suffix(".png"), out)
     summary = {"image": str(args.image), "from": source.renderer, "to": target.renderer,
-               "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread}
+               "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread,
+               "shift": args.shift, "sensor": sensor.to_json() if sensor else None}
     if args.reference is not None:
         reference = read_image(args.reference)
         if reference.shape != image.shape:
