@@ -184,7 +184,7 @@ def test_block_means_in_the_file_and_files_without_them(camera_pair, tmp_path):
     with pytest.raises(InputError) as err:
         sensor_step(old, b)
     assert err.value.field == "blocks" and "again" in str(err.value)
-    for bad in (np.full(a.blocks.shape, np.inf), a.blocks[:, :4], a.blocks[:2], -a.blocks):
+    for bad in (np.full(a.blocks.shape, np.inf), a.blocks[:, :4], a.blocks[:2], a.blocks[..., :2]):
         data["blocks"] = bad
         np.savez(tmp_path / "bad.npz", **data)
         with pytest.raises(InputError) as err:
@@ -210,7 +210,7 @@ def test_cli_transfer_with_the_sensor_step(tmp_path):
             "--from", str(tmp_path / "a" / "characterisation.npz"),
             "--to", str(tmp_path / "b" / "characterisation.npz")]
     bright = image.min(-1) > 0.02
-    for name, extra in (("both", ["--sensor"]), ("alone", ["--method", "sensor"]),
+    for name, extra in (("both", ["--sensor", "--normals"]), ("alone", ["--method", "sensor"]),
                         ("additive", ["--shift", "additive"])):
         out = tmp_path / f"{name}.exr"
         assert main(["appearance", "transfer", *args, "--out", str(out), *extra]) == 0
@@ -223,3 +223,7 @@ def test_cli_transfer_with_the_sensor_step(tmp_path):
             assert np.abs(np.array(s["matrix"]) - np.eye(3)).max() < 0.02
         else:
             assert summary["sensor"] is None and summary["shift"] == "additive"
+        assert summary["normals"] == (name == "both")
+    # The steps belong to the statistics method: asking for them with another is an error.
+    assert main(["appearance", "transfer", *args, "--out", str(tmp_path / "x.exr"), "--method",
+                 "sensor", "--normals"]) == 2

@@ -41,6 +41,11 @@ statistics of A are then carried through it approximately (:func:`_through_senso
 transfer corrects only what the sensor step leaves; ``theta=False`` skips the θ transfer (the
 sensor step alone, for a target that is a camera on A's renderings).
 
+The normal step (``normals``, :mod:`abs.appearance.normals`) goes last: per class, θ bin and
+azimuth φ of the normal, how B shares a bin's light out over φ compared with A (sharper or
+blurrier reflections of the environment), for the classes where that predicts across halves of
+the design. It holds only under the characterisation's own lighting, and is off by default.
+
 Pixels with id 0 (background, silhouettes) are otherwise left as they are; bins that either
 characterisation has no pixels in keep their normalised values.
 """
@@ -54,12 +59,13 @@ import numpy as np
 from collections.abc import Callable
 
 from abs.appearance.geometry import Geometry
+from abs.appearance.normals import apply_normal_gains, normal_gains
 from abs.appearance.sensor import Sensor, fit_sensor
 from abs.appearance.statistics import Characterisation, bin_moments, object_bins
 from abs.errors import InputError
 
 __all__ = ["COLOUR_MATRICES", "SHIFTS", "transfer", "colour_matrices", "check_compatible",
-           "sensor_step"]
+           "sensor_step", "normal_step"]
 
 _MAX_SPREAD_SCALE = 4.0  # a bin whose spread would grow more than this is noise, not a filter
 COLOUR_MATRICES = ("none", "class", "global")
@@ -156,6 +162,19 @@ def sensor_step(source: Characterisation, target: Characterisation) -> Sensor:
     return fit_sensor(source.blocks, target.blocks)
 
 
+def normal_step(source: Characterisation, target: Characterisation):
+    """The normal step's gains per class and its split test per class
+    (:func:`abs.appearance.normals.normal_gains`); both files on one design, with φ sums."""
+    check_compatible(source, target, need_design=True)
+    for c, role in ((source, "--from"), (target, "--to")):
+        if c.phi_sums is None:
+            raise InputError(None, "phi_sums", f"the {role} characterisation ({c.renderer}) has no "
+                                               f"φ sums: characterise it again with this version of abs")
+    if source.phi_sums.shape[3] != target.phi_sums.shape[3]:
+        raise InputError(None, "phi_sums", "the two characterisations use different φ bins")
+    return normal_gains(source, target)
+
+
 def _through_sensor(source: Characterisation, sensor: Sensor) -> Characterisation:
     """``source`` as if its images had been passed through ``sensor`` (approximately).
 
@@ -182,12 +201,19 @@ def _through_sensor(source: Characterisation, sensor: Sensor) -> Characterisatio
             alpha[c] = np.where(source.counts[c][:, None] > 0, np.nansum(w * out, axis=0) / light, np.nan)
         lam[c] = np.where(source.counts[c][:, None] > 0, source.lam[c] + np.nan_to_num(moved), np.nan)
         profiles[:, c] = out
-    return replace(source, alpha=alpha, lam=lam, profiles=profiles)
+    phi_sums = source.phi_sums
+    if phi_sums is not None:  # each cell's mean colour through the sensor, as for the profiles
+        n = source.phi_counts[..., None].astype(float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.where(n > 0, phi_sums / np.where(n > 0, n, 1.0), 0.0)
+        phi_sums = np.where(n > 0, n * sensor.curve(means @ sensor.matrix.T), 0.0)
+    return replace(source, alpha=alpha, lam=lam, profiles=profiles, phi_sums=phi_sums)
 
 
 def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
              target: Characterisation, colour_matrix: str = "none", spread: bool = False,
-             shift: str = "ratio", sensor: Sensor | bool = False, theta: bool = True) -> np.ndarray:
+             shift: str = "ratio", sensor: Sensor | bool = False, theta: bool = True,
+             normals: bool = False) -> np.ndarray:
     """``image`` (from ``source``'s renderer) as ``target``'s renderer would show it.
 
     Parameters
@@ -209,6 +235,8 @@ def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
         (:func:`sensor_step`), True to fit one here (slow: fit once for many images), or False.
     theta : bool
         Apply the per-class θ transfer (α, λ, ψ); False leaves only the steps before it.
+    normals : bool
+        Then the normal step (:func:`normal_step`): only for images lit as the design was.
 
     Returns
     -------
@@ -221,7 +249,10 @@ def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
         raise InputError(None, "colour_matrix", f"expected one of {COLOUR_MATRICES}, got {colour_matrix!r}")
     if shift not in SHIFTS:
         raise InputError(None, "shift", f"expected one of {tuple(SHIFTS)}, got {shift!r}")
-    check_compatible(source, target, need_design=colour_matrix != "none" or sensor is not False)
+    check_compatible(source, target,
+                     need_design=colour_matrix != "none" or sensor is not False or normals)
+    if normals and not theta:
+        raise InputError(None, "normals", "the normal step refines the θ transfer: it needs theta=True")
     out = np.array(image, np.float64)
     if sensor is True:
         sensor = sensor_step(source, target)
@@ -264,4 +295,7 @@ def transfer(image: np.ndarray, geometry: Geometry, source: Characterisation,
         scale = np.clip(np.where(ok[:, None] & spread, scale, 1.0), 0.0, _MAX_SPREAD_SCALE)
         moved = SHIFTS[shift](xb, mu[bins], lam_shift[bins], scale[bins])
         out[mask] = moved * energy * rho
+    if normals:
+        gains, _ = normal_step(source, target)  # source: through the sensor when there is one
+        out = apply_normal_gains(out, geometry, gains, source.theta_edges)
     return out.astype(np.float32)

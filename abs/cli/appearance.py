@@ -72,6 +72,10 @@ def add_parser(sub) -> None:
     t.add_argument("--sensor", action="store_true",
                    help="first the sensor step: vignetting, colour matrix and response fitted on "
                         "both files' design block means (for a camera; docs/appearance.md)")
+    t.add_argument("--normals", action="store_true",
+                   help="last the normal step: light moved over the normal's azimuth within each θ "
+                        "bin (sharper or blurrier reflections); only for images lit by the "
+                        "characterisation's environment (docs/appearance.md)")
     t.add_argument("--target", dest="reference", type=Path,
                    help="B's own image of the scene: score the result against it")
     t.set_defaults(run=run_transfer)
@@ -205,7 +209,8 @@ def _statistics(image, geometry, source, target, args):
     from abs.appearance.transfer import sensor_step
 
     sensor = sensor_step(source, target) if args.sensor else False
-    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift, sensor)
+    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift, sensor,
+                   normals=args.normals)
     return out, sensor
 
 
@@ -242,13 +247,17 @@ def run_transfer(args) -> int:
     image = read_image(args.image)
     geometry = read_geometry(args.geometry, image.shape[:2])
     source, target = read_characterisation(args.source), read_characterisation(args.target)
+    if args.method != "statistics" and (args.normals or args.sensor or args.colour_matrix != "none"):
+        raise InputError(None, "--method", f"--sensor, --normals and --colour-matrix are steps of "
+                                           f"--method statistics, not of {args.method}")
     out, sensor = _METHODS[args.method](image, geometry, source, target, args)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_exr(args.out, out)
     write_png(args.out.with_suffix(".png"), out)
     summary = {"image": str(args.image), "from": source.renderer, "to": target.renderer,
                "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread,
-               "shift": args.shift, "sensor": sensor.to_json() if sensor else None}
+               "shift": args.shift, "sensor": sensor.to_json() if sensor else None,
+               "normals": args.normals}
     if args.reference is not None:
         reference = read_image(args.reference)
         if reference.shape != image.shape:
