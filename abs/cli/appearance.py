@@ -3,6 +3,8 @@
     abs appearance characterise --renderer NAME [--option KEY=VALUE ...] --out DIR
     abs appearance render --renderer NAME --design heldout --out DIR
     abs appearance transfer IMAGE --geometry GEOMETRY.npz --from A.npz --to B.npz --out OUT.exr
+        [--method statistics|sensor|histogram-global|histogram-local] [--shift ratio|additive]
+        [--sensor] [--colour-matrix none|class|global] [--spread] [--normals]
     abs appearance environment IMAGE --geometry GEOMETRY.npz --out ENV.exr
     abs appearance geometry SCENE CAPTURE --class OBJECT=CLASS ... --out DIR
 
@@ -10,8 +12,9 @@
 ``DIR/characterisation.npz`` (the statistics), ``DIR/characterisation.json`` (a readable summary)
 and, per scene, ``DIR/scenes/NAME/{image.exr,image.png,geometry.npz}``. ``render`` writes only the
 scenes of a design (the held-out ones to test a transfer on). ``transfer`` makes IMAGE, rendered by
-the renderer of ``--from``, look as the renderer of ``--to`` would render it, and with
-``--target`` scores the result against that renderer's own image (CIEDE2000, per object).
+the renderer of ``--from``, look as the renderer of ``--to`` would render it (the steps and when
+to use which: docs/appearance.md, "Transfer"), and with ``--target`` scores the result against
+that renderer's own image (CIEDE2000, per object).
 ``environment`` estimates the lighting from the image's background (objects removed, the central
 circle read as the hemisphere behind the image plane and mirrored) and writes a lat-long map, with
 ``ENV.json`` giving its ``environment.to_world`` for the design camera. ``geometry`` writes the
