@@ -224,6 +224,7 @@ def test_cli_transfer_with_the_sensor_step(tmp_path):
         else:
             assert summary["sensor"] is None and summary["shift"] == "additive"
         assert summary["normals"] == (name == "both")
+        assert (summary["normal_step"] is not None) == (name == "both")
     # The steps belong to the statistics method: asking for them with another is an error.
     assert main(["appearance", "transfer", *args, "--out", str(tmp_path / "x.exr"), "--method",
                  "sensor", "--normals"]) == 2

@@ -162,9 +162,10 @@ def sensor_step(source: Characterisation, target: Characterisation) -> Sensor:
     return fit_sensor(source.blocks, target.blocks)
 
 
-def normal_step(source: Characterisation, target: Characterisation):
+def normal_step(source: Characterisation, target: Characterisation, sensor: Sensor | None = None):
     """The normal step's gains per class and its split test per class
-    (:func:`abs.appearance.normals.normal_gains`); both files on one design, with φ sums."""
+    (:func:`abs.appearance.normals.normal_gains`); both files on one design, with φ sums.
+    ``sensor``: the sensor step that goes before it, if any (A's sums are carried through it)."""
     check_compatible(source, target, need_design=True)
     for c, role in ((source, "--from"), (target, "--to")):
         if c.phi_sums is None:
@@ -172,6 +173,8 @@ def normal_step(source: Characterisation, target: Characterisation):
                                                f"φ sums: characterise it again with this version of abs")
     if source.phi_sums.shape[3] != target.phi_sums.shape[3]:
         raise InputError(None, "phi_sums", "the two characterisations use different φ bins")
+    if sensor is not None:
+        source = _through_sensor(source, sensor)
     return normal_gains(source, target)
 
 

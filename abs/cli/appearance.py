@@ -209,12 +209,14 @@ def run_render(args) -> int:
 
 def _statistics(image, geometry, source, target, args):
     from abs.appearance import transfer
-    from abs.appearance.transfer import sensor_step
+    from abs.appearance.transfer import normal_step, sensor_step
 
-    sensor = sensor_step(source, target) if args.sensor else False
-    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift, sensor,
-                   normals=args.normals)
-    return out, sensor
+    sensor = sensor_step(source, target) if args.sensor else None
+    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift,
+                   sensor or False, normals=args.normals)
+    # Which classes got the normal step, and the split test that decided it.
+    report = normal_step(source, target, sensor)[1] if args.normals else None
+    return out, {"sensor": sensor.to_json() if sensor else None, "normal_step": report}
 
 
 def _sensor_only(image, geometry, source, target, args):
@@ -222,19 +224,21 @@ def _sensor_only(image, geometry, source, target, args):
     from abs.appearance.transfer import sensor_step
 
     sensor = sensor_step(source, target)
-    return transfer(image, geometry, source, target, sensor=sensor, theta=False), sensor
+    return (transfer(image, geometry, source, target, sensor=sensor, theta=False),
+            {"sensor": sensor.to_json(), "normal_step": None})
 
 
 def _histogram(kind):
     def run(image, geometry, source, target, args):
         from abs.appearance.histogram import match_global, match_local
 
-        return {"global": match_global, "local": match_local}[kind](image, geometry, target), False
+        out = {"global": match_global, "local": match_local}[kind](image, geometry, target)
+        return out, {"sensor": None, "normal_step": None}
     return run
 
 
-# --method: what makes the image look like the target's (each returns the image and the sensor
-# step it fitted, or False).
+# --method: what makes the image look like the target's. Each returns the image and what its
+# fitted steps were (for the summary JSON).
 _METHODS = {"statistics": _statistics, "sensor": _sensor_only,
             "histogram-global": _histogram("global"), "histogram-local": _histogram("local")}
 
@@ -253,14 +257,13 @@ def run_transfer(args) -> int:
     if args.method != "statistics" and (args.normals or args.sensor or args.colour_matrix != "none"):
         raise InputError(None, "--method", f"--sensor, --normals and --colour-matrix are steps of "
                                            f"--method statistics, not of {args.method}")
-    out, sensor = _METHODS[args.method](image, geometry, source, target, args)
+    out, steps = _METHODS[args.method](image, geometry, source, target, args)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_exr(args.out, out)
     write_png(args.out.with_suffix(".png"), out)
     summary = {"image": str(args.image), "from": source.renderer, "to": target.renderer,
                "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread,
-               "shift": args.shift, "sensor": sensor.to_json() if sensor else None,
-               "normals": args.normals}
+               "shift": args.shift, "normals": args.normals, **steps}
     if args.reference is not None:
         reference = read_image(args.reference)
         if reference.shape != image.shape:
