@@ -97,7 +97,8 @@ def test_phi_sums_in_the_file_and_files_without_them(tmp_path):
         normal_step(read_characterisation(tmp_path / "old.npz"), b)
     assert err.value.field == "phi_sums" and "again" in str(err.value)
     for change in ({"phi_counts": None}, {"phi_sums": data["phi_sums"][..., :2]},
-                   {"phi_counts": -data["phi_counts"]}, {"phi_sums": np.full(data["phi_sums"].shape, np.nan)}):
+                   {"phi_counts": -data["phi_counts"]},
+                   {"phi_sums": np.full(data["phi_sums"].shape, np.nan)}):
         bad = dict(data)
         for k, v in change.items():
             if v is None:

@@ -201,7 +201,8 @@ def test_cli_transfer_with_the_sensor_step(tmp_path):
     gains = np.array([1.5, 1.0, 0.7])
     common = ["--classes", "wood", "--walls", "white,red", "--samples", "1", "--size", "32",
               "--spp", "4", "--environment", "constant:0.7"]
-    assert main(["appearance", "characterise", "--renderer", "abs", "--out", str(tmp_path / "a"), *common]) == 0
+    assert main(["appearance", "characterise", "--renderer", "abs", "--out", str(tmp_path / "a"),
+                 *common]) == 0
     assert main(["appearance", "characterise", "--renderer", "gains", "--option", f"gains={gains.tolist()}",
                  "--out", str(tmp_path / "b"), *common]) == 0
     scene = tmp_path / "a" / "scenes" / "wood-0-white"
@@ -218,6 +219,11 @@ def test_cli_transfer_with_the_sensor_step(tmp_path):
         result = read_image(out)
         if name == "alone":
             np.testing.assert_allclose(result[bright], (image * gains)[bright], rtol=0.02)
+            # The summary's sensor is the fitted one: rebuilt from the JSON it gives the image back.
+            j = summary["sensor"]
+            rebuilt = Sensor(*(np.array(j[k]) for k in ("vignetting", "matrix", "knots_log10",
+                                                        "response_log10")))
+            np.testing.assert_allclose(rebuilt.apply(image), result, rtol=1e-5, atol=1e-7)
         if name != "additive":
             s = summary["sensor"]
             assert np.abs(np.array(s["matrix"]) - np.eye(3)).max() < 0.02

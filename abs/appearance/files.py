@@ -5,8 +5,9 @@ never code. Every way a file can be wrong is an :class:`abs.errors.InputError` n
 and the field (the array's name, or ``meta.<key>`` for the JSON header).
 
 The characterisation format grows compatibly: arrays added later (``blocks`` for the sensor
-step, ``phi_sums`` and ``phi_counts`` for the normal step) are optional on reading, so files written before them still read (the step that needs them
-then says so), and readers that predate them ignore them (``np.load`` reads arrays by name).
+step, ``phi_sums`` and ``phi_counts`` for the normal step) are optional on reading, so files
+written before them still read (the step that needs them then says so), and readers that predate
+them ignore them (``np.load`` reads arrays by name).
 """
 
 from __future__ import annotations

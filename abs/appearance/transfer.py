@@ -29,9 +29,10 @@ bin by ``(μ + λ_A − λ_B) / μ``; ``"additive"`` adds ``λ_A − λ_B`` to e
 bin mean by the same amount. They differ within a bin whose pixels spread widely (a metal
 reflecting bright sky and dark walls, a highlight): the additive shift moves a dark pixel as far
 as a bright one and can push it below zero (the benchmark counted 21 such pixels for the Mitsuba
-target and 108 for the camera with the additive form), while the ratio keeps every pixel's contrast to its bin mean, is exact
-for any filter that multiplies by a function of θ, and never makes a pixel negative. Measured on
-the benchmark it lowers the per-pixel ΔE00 on every target, identity included.
+target and 108 for the camera with the additive form), while the ratio keeps every pixel's
+contrast to its bin mean, is exact for any filter that multiplies by a function of θ, and never
+makes a pixel negative. Measured on the benchmark it lowers the per-pixel ΔE00 on every target,
+identity included.
 
 The sensor step (``sensor``, :mod:`abs.appearance.sensor`) goes first, before everything: a
 filter of the pixel's radiance and image position (vignetting, a colour matrix, a per-channel
@@ -52,11 +53,10 @@ characterisation has no pixels in keep their normalised values.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
-
-from collections.abc import Callable
 
 from abs.appearance.geometry import Geometry
 from abs.appearance.normals import apply_normal_gains, normal_gains
