@@ -13,8 +13,14 @@ Monte-Carlo noise away.
 Targets: ``abs`` with other seeds (identity), ``gains`` (a known per-channel filter: its gains
 must come back within 2 %), ``mitsuba`` (stock ``path``, max_depth 3, alpha = roughness², thin
 glass, white balance and exposure) and ``camera`` (vignetting, colour matrix, response curve).
-Methods: the statistics transfer with no / per-class / global colour matrix, with the spread
-term, and global / local histogram matching.
+Methods: the statistics transfer (λ as a per-bin ratio, the default; and as the additive shift it
+replaced) with no / per-class / global colour matrix, with the spread term, with the normal step;
+the sensor step alone and before the statistics; global / local histogram matching.
+
+Where the per-pixel error comes from: for the methods in ``BREAKDOWN``, the pixel ΔE00 over all
+held-out non-glass object pixels split by class, θ bin, brightness (the target pixel's luminance
+over its object's median) and image radius (over the half-diagonal), each with its share of the
+summed error; the identity target's "before" is the noise floor.
 
 Scaled down from the paper (120 scenes, 5 samples per class) to run in about 10 minutes on two
 CPU cores: 64x64 pixels, 64 spp for the characterisation, 512 spp for the held-out images.
@@ -36,22 +42,80 @@ import numpy as np
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TARGETS = {"abs": {}, "gains": {"gains": [1.2, 1.0, 0.75]}, "mitsuba": {}, "camera": {}}
-METHODS = ("before", "statistics", "statistics+class-matrix", "statistics+global-matrix",
-           "statistics+spread", "histogram-global", "histogram-local")
 
 
-def _apply(method, image, geometry, a, b):
+def _methods():
+    """Method name -> ``f(image, geometry, a, b, sensor)`` (``sensor``: the target's fitted step)."""
     from abs.appearance import transfer
     from abs.appearance.histogram import match_global, match_local
 
-    if method == "before":
-        return image
-    if method == "histogram-global":
-        return match_global(image, geometry, b)
-    if method == "histogram-local":
-        return match_local(image, geometry, b)
-    matrix = {"statistics+class-matrix": "class", "statistics+global-matrix": "global"}.get(method, "none")
-    return transfer(image, geometry, a, b, colour_matrix=matrix, spread=method.endswith("spread"))
+    def stats(**kw):
+        return lambda image, geometry, a, b, sensor: transfer(image, geometry, a, b, **kw)
+
+    return {
+        "before": lambda image, geometry, a, b, sensor: image,
+        "statistics": stats(),
+        "statistics-additive": stats(shift="additive"),
+        "statistics+class-matrix": stats(colour_matrix="class"),
+        "statistics+global-matrix": stats(colour_matrix="global"),
+        "statistics+spread": stats(spread=True),
+        "statistics+normals": stats(normals=True),
+        "sensor": lambda image, geometry, a, b, sensor: transfer(image, geometry, a, b, sensor=sensor,
+                                                                  theta=False),
+        "sensor+statistics": lambda image, geometry, a, b, sensor: transfer(image, geometry, a, b,
+                                                                             sensor=sensor),
+        "histogram-global": lambda image, geometry, a, b, sensor: match_global(image, geometry, b),
+        "histogram-local": lambda image, geometry, a, b, sensor: match_local(image, geometry, b),
+    }
+
+
+METHODS = ("before", "statistics", "statistics-additive", "statistics+class-matrix",
+           "statistics+global-matrix", "statistics+spread", "statistics+normals", "sensor",
+           "sensor+statistics", "histogram-global", "histogram-local")
+BREAKDOWN = ("before", "statistics", "statistics-additive", "statistics+normals", "sensor")
+_BRIGHTNESS = (0.0, 0.5, 1.0, 2.0, 4.0, np.inf)  # target luminance over its object's median
+_RADIUS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.01)  # distance from the image centre over the half-diagonal
+
+
+def _pixels(image, target, geometry):
+    """Per non-glass object pixel: ΔE00, class, θ bin, relative brightness, radius, and whether
+    the result went below zero in some channel."""
+    from abs.appearance.score import delta_e_map
+    from abs.appearance.sensor import image_radius2
+    from abs.appearance.statistics import object_bins, theta_edges
+
+    delta = delta_e_map(image, target)
+    radius = np.sqrt(image_radius2(*image.shape[:2]))
+    rows = []
+    for obj, mask, bins in object_bins(geometry, theta_edges(9)):
+        cls = geometry.classes[obj - 1]
+        if cls == "glass":
+            continue
+        lum = target[mask] @ np.array([0.2126, 0.7152, 0.0722])
+        rows.append({"delta": delta[mask], "class": np.full(mask.sum(), cls), "bin": bins,
+                     "brightness": lum / max(float(np.median(lum)), 1e-12), "radius": radius[mask],
+                     "negative": (image[mask] < 0).any(-1)})
+    return {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+
+
+def _split(p):
+    """Mean ΔE00 and share of the summed error by class, θ bin, brightness and radius."""
+    total = p["delta"].sum()
+
+    def part(select):
+        n = int(select.sum())
+        return {"pixels": n, "mean": round(float(p["delta"][select].mean()), 3) if n else None,
+                "share": round(float(p["delta"][select].sum() / total), 3)}
+
+    return {"mean": round(float(p["delta"].mean()), 3), "sd": round(float(p["delta"].std()), 3),
+            "p90": round(float(np.percentile(p["delta"], 90)), 3),
+            "negative_pixels": int(p["negative"].sum()),
+            "class": {c: part(p["class"] == c) for c in sorted(set(p["class"]))},
+            "theta_bin_deg": {f"{10 * b}-{10 * b + 10}": part(p["bin"] == b) for b in sorted(set(p["bin"]))},
+            "brightness": {f"{lo}-{hi}": part((p["brightness"] >= lo) & (p["brightness"] < hi))
+                           for lo, hi in zip(_BRIGHTNESS[:-1], _BRIGHTNESS[1:])},
+            "radius": {f"{lo}-{hi}": part((p["radius"] >= lo) & (p["radius"] < hi))
+                       for lo, hi in zip(_RADIUS[:-1], _RADIUS[1:])}}
 
 
 def _scene_score(image, target, geometry):
@@ -74,6 +138,7 @@ def main() -> None:
     from abs.appearance import characterise, characterisation_design, heldout_design, renderer
     from abs.appearance.environment import load_environment
     from abs.appearance.scenes import design_camera, scene_geometry
+    from abs.appearance.transfer import normal_step, sensor_step
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", type=int, default=64)
@@ -105,17 +170,25 @@ def main() -> None:
     for i, spec in enumerate(heldout):
         sources[spec.name] = (renderer("abs").render(spec, env, camera, args.heldout_spp, 7 + i),
                               scene_geometry(spec, camera))
-    table = {}
+    table, breakdown, steps = {}, {}, {}
+    methods = _methods()
     for t, (name, opts) in enumerate(TARGETS.items()):
         b = chars[name]
+        sensor = timed(f"sensor step {name}", lambda b=b: sensor_step(a, b))
+        steps[name] = {"sensor": sensor.to_json(), "normal_step_split_test": normal_step(a, b)[1]}
         rows = {m: [] for m in METHODS}
+        pixels = {m: [] for m in BREAKDOWN}
         for i, spec in enumerate(heldout):
             image, geometry = sources[spec.name]
             target = renderer(name, opts).render(spec, env, camera, args.heldout_spp, 100 + 10 * t + i)
             for m in METHODS:
-                rows[m].append({"scene": spec.name, **_scene_score(_apply(m, image, geometry, a, b),
-                                                                     target, geometry)})
+                out = methods[m](image, geometry, a, b, sensor)
+                rows[m].append({"scene": spec.name, **_scene_score(out, target, geometry)})
+                if m in BREAKDOWN:
+                    pixels[m].append(_pixels(out, target, geometry))
         table[name] = rows
+        breakdown[name] = {m: _split({k: np.concatenate([p[k] for p in pixels[m]]) for k in pixels[m][0]})
+                           for m in BREAKDOWN}
         print(f"{name}: " + ", ".join(f"{m} {np.mean([r['mean'] for r in rows[m]]):.2f}/"
                                       f"{np.mean([r['profile'] for r in rows[m]]):.2f}" for m in METHODS),
               flush=True)
@@ -155,7 +228,7 @@ def main() -> None:
                "settings": {"size": args.size, "spp": args.spp, "heldout_spp": args.heldout_spp,
                             "characterisation_scenes": len(design), "heldout_scenes": len(heldout)},
                "timings_s": {**timings, "total": round(time.time() - start, 1)},
-               "criteria": criteria, "table": table}
+               "criteria": criteria, "steps": steps, "breakdown": breakdown, "table": table}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
     print(json.dumps({"criteria": criteria, "timings_s": summary["timings_s"]}, indent=1))

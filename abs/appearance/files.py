@@ -3,6 +3,11 @@
 Both are NumPy ``.npz`` archives read with ``allow_pickle=False``: a file a user gives is data,
 never code. Every way a file can be wrong is an :class:`abs.errors.InputError` naming the file
 and the field (the array's name, or ``meta.<key>`` for the JSON header).
+
+The characterisation format grows compatibly: arrays added later (``blocks`` for the sensor
+step, ``phi_sums`` and ``phi_counts`` for the normal step) are optional on reading, so files
+written before them still read (the step that needs them then says so), and readers that predate
+them ignore them (``np.load`` reads arrays by name).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ FORMAT = "abs-appearance-characterisation/1"
 GEOMETRY_FORMAT = "abs-appearance-geometry/1"
 
 _PER_CLASS = ("alpha", "lam", "psi")
+_OPTIONAL = ("blocks", "phi_sums", "phi_counts")  # added after format /1 was first written
 
 
 def _meta_array(meta: dict) -> np.ndarray:
@@ -37,7 +43,8 @@ def write_characterisation(path: str | Path, c: Characterisation) -> None:
     np.savez_compressed(path, meta=_meta_array(meta), theta_edges=c.theta_edges, alpha=c.alpha,
                         lam=c.lam, psi=c.psi, counts=c.counts, profiles=c.profiles,
                         profile_counts=c.profile_counts, hist_edges=HIST_EDGES,
-                        hist_global=c.hist_global, hist_local=c.hist_local)
+                        hist_global=c.hist_global, hist_local=c.hist_local,
+                        **{name: getattr(c, name) for name in _OPTIONAL if getattr(c, name) is not None})
 
 
 def _load(path: Path, what: str) -> dict:
@@ -117,9 +124,25 @@ def read_characterisation(path: str | Path) -> Characterisation:
     n_hist = len(HIST_EDGES) - 1
     hist_global = _array(path, arrays, "hist_global", (3, n_hist), finite=True)
     hist_local = _array(path, arrays, "hist_local", (nc, 3, n_hist), finite=True)
+    blocks = None
+    if "blocks" in arrays:  # optional: files from before the sensor step lack it
+        blocks = _array(path, arrays, "blocks", (profile_counts.shape[0], None, None, 3))
+        if blocks.shape[1] != blocks.shape[2] or blocks.shape[1] < 1:
+            raise InputError(path, "blocks", f"expected a square grid of blocks, got "
+                                             f"{blocks.shape[1]}x{blocks.shape[2]}")
+        if np.isinf(blocks).any():
+            raise InputError(path, "blocks", "infinite values (NaN marks an empty block)")
+    phi_sums = phi_counts = None
+    if "phi_sums" in arrays or "phi_counts" in arrays:  # optional, but only as a pair
+        phi_counts = _array(path, arrays, "phi_counts", (profile_counts.shape[0], nc, nb, None),
+                            finite=True)
+        if np.any(phi_counts < 0):
+            raise InputError(path, "phi_counts", "negative pixel counts")
+        phi_sums = _array(path, arrays, "phi_sums", phi_counts.shape + (3,), finite=True)
     return Characterisation(meta["renderer"], meta["options"], meta["design"], classes, edges,
                             stats["alpha"], stats["lam"], stats["psi"], counts, profiles,
-                            profile_counts, hist_global, hist_local, meta["settings"])
+                            profile_counts, hist_global, hist_local, meta["settings"], blocks,
+                            phi_sums, phi_counts)
 
 
 def write_geometry(path: str | Path, geometry: Geometry) -> None:

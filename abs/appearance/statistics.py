@@ -16,7 +16,10 @@ pixels of every object of class c in every characterisation image:
   differences between scenes do not enter them.
 
 Beside them, for the histogram-matching baselines the paper shows to fail: per channel, the
-histogram of log10 radiance over all object pixels (global) and per class (local).
+histogram of log10 radiance over all object pixels (global) and per class (local); for the
+sensor step (:mod:`abs.appearance.sensor`), each image's means over a coarse grid of blocks; and
+for the normal step (:mod:`abs.appearance.normals`), per scene the sums of each class's radiance
+in cells of θ and the normal's azimuth φ.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from abs.appearance.geometry import Geometry
+from abs.appearance.normals import PHI_BINS, phi_bins
+from abs.appearance.sensor import block_means
 
 __all__ = ["Characterisation", "Accumulator", "bin_moments", "object_bins", "theta_edges",
            "HIST_EDGES", "LOG_FLOOR"]
@@ -68,6 +73,14 @@ class Characterisation:
         ``(n_classes, 3, n_hist)``.
     settings : dict
         How it was made (image size, spp, seed, environment).
+    blocks : np.ndarray or None
+        ``(n_scenes, g, g, 3)`` each scene's whole image (every pixel) averaged over a g x g grid
+        of equal blocks, linear radiance (:func:`abs.appearance.sensor.block_means`), for the
+        sensor step; None in files written before it existed.
+    phi_sums, phi_counts : np.ndarray or None
+        ``(n_scenes, n_classes, n_bins, n_phi, 3)`` summed linear radiance and
+        ``(n_scenes, n_classes, n_bins, n_phi)`` pixel counts per θ bin and azimuth bin
+        (:func:`abs.appearance.normals.phi_bins`), for the normal step; None in older files.
     """
 
     renderer: str
@@ -84,6 +97,9 @@ class Characterisation:
     hist_global: np.ndarray
     hist_local: np.ndarray
     settings: dict = field(default_factory=dict)
+    blocks: np.ndarray | None = None
+    phi_sums: np.ndarray | None = None
+    phi_counts: np.ndarray | None = None
 
     @property
     def n_bins(self) -> int:
@@ -136,6 +152,9 @@ class Accumulator:
         self.sum_spread = np.zeros(shape + (3,))
         self.profiles: list[np.ndarray] = []
         self.profile_counts: list[np.ndarray] = []
+        self.blocks: list[np.ndarray] = []
+        self.phi_sums: list[np.ndarray] = []
+        self.phi_counts: list[np.ndarray] = []
         n_hist = len(HIST_EDGES) - 1
         self.hist_global = np.zeros((3, n_hist))
         self.hist_local = np.zeros((len(self.classes), 3, n_hist))
@@ -145,6 +164,9 @@ class Accumulator:
         n_bins = len(self.edges) - 1
         sums = np.zeros((len(self.classes), n_bins, 3))
         counts = np.zeros((len(self.classes), n_bins))
+        phi_sums = np.zeros((len(self.classes), n_bins * PHI_BINS, 3))
+        phi_counts = np.zeros((len(self.classes), n_bins * PHI_BINS))
+        phi = phi_bins(geometry.normals)
         for obj, mask, bins in object_bins(geometry, self.edges):
             c = self.classes.index(geometry.classes[obj - 1])
             pixels = image[mask].astype(np.float64)
@@ -163,6 +185,10 @@ class Accumulator:
             self.sum_spread[c, has] += n[has, None] * (var_ib[has] - var_lb[has])
             sums[c, has] += n[has, None] * mean_i[has]
             counts[c, has] += n[has]
+            cell = bins * PHI_BINS + phi[mask]
+            phi_counts[c] += np.bincount(cell, minlength=n_bins * PHI_BINS)
+            for k in range(3):
+                phi_sums[c, :, k] += np.bincount(cell, pixels[:, k], n_bins * PHI_BINS)
             logs = np.log10(np.maximum(pixels, LOG_FLOOR))
             for k in range(3):
                 h = np.histogram(np.clip(logs[:, k], HIST_EDGES[0], HIST_EDGES[-1]), HIST_EDGES)[0]
@@ -171,6 +197,9 @@ class Accumulator:
         with np.errstate(invalid="ignore", divide="ignore"):
             self.profiles.append(sums / counts[..., None])
         self.profile_counts.append(counts)
+        self.blocks.append(block_means(image))
+        self.phi_sums.append(phi_sums.reshape(len(self.classes), n_bins, PHI_BINS, 3))
+        self.phi_counts.append(phi_counts.reshape(len(self.classes), n_bins, PHI_BINS))
 
     def finish(self, renderer: str, options: dict, design: str, settings: dict) -> Characterisation:
         """The :class:`Characterisation` of everything added."""
@@ -183,4 +212,5 @@ class Accumulator:
                                 alpha, lam, psi, self.n.astype(np.int64), np.array(self.profiles),
                                 np.array(self.profile_counts).astype(np.int64),
                                 self.hist_global.astype(np.int64), self.hist_local.astype(np.int64),
-                                dict(settings))
+                                dict(settings), np.array(self.blocks), np.array(self.phi_sums),
+                                np.array(self.phi_counts).astype(np.int64))

@@ -3,6 +3,8 @@
     abs appearance characterise --renderer NAME [--option KEY=VALUE ...] --out DIR
     abs appearance render --renderer NAME --design heldout --out DIR
     abs appearance transfer IMAGE --geometry GEOMETRY.npz --from A.npz --to B.npz --out OUT.exr
+        [--method statistics|sensor|histogram-global|histogram-local] [--shift ratio|additive]
+        [--sensor] [--colour-matrix none|class|global] [--spread] [--normals]
     abs appearance environment IMAGE --geometry GEOMETRY.npz --out ENV.exr
     abs appearance geometry SCENE CAPTURE --class OBJECT=CLASS ... --out DIR
 
@@ -10,8 +12,9 @@
 ``DIR/characterisation.npz`` (the statistics), ``DIR/characterisation.json`` (a readable summary)
 and, per scene, ``DIR/scenes/NAME/{image.exr,image.png,geometry.npz}``. ``render`` writes only the
 scenes of a design (the held-out ones to test a transfer on). ``transfer`` makes IMAGE, rendered by
-the renderer of ``--from``, look as the renderer of ``--to`` would render it, and with
-``--target`` scores the result against that renderer's own image (CIEDE2000, per object).
+the renderer of ``--from``, look as the renderer of ``--to`` would render it (the steps and when
+to use which: docs/appearance.md, "Transfer"), and with ``--target`` scores the result against
+that renderer's own image (CIEDE2000, per object).
 ``environment`` estimates the lighting from the image's background (objects removed, the central
 circle read as the hemisphere behind the image plane and mirrored) and writes a lat-long map, with
 ``ENV.json`` giving its ``environment.to_world`` for the design camera. ``geometry`` writes the
@@ -59,11 +62,23 @@ def add_parser(sub) -> None:
     t.add_argument("--from", dest="source", type=Path, required=True, help="A's characterisation")
     t.add_argument("--to", dest="target", type=Path, required=True, help="B's characterisation")
     t.add_argument("--out", type=Path, required=True, help="output image (.exr)")
-    t.add_argument("--method", default="statistics",
-                   choices=("statistics", "histogram-global", "histogram-local"))
+    t.add_argument("--method", default="statistics", choices=tuple(_METHODS),
+                   help="statistics: the θ transfer (after the optional steps below); sensor: the "
+                        "sensor step alone; histogram-*: the paper's failing baselines "
+                        "(default %(default)s)")
     t.add_argument("--colour-matrix", default="none", choices=("none", "class", "global"),
                    help="colour-matrix step before the θ transfer (default %(default)s)")
     t.add_argument("--spread", action="store_true", help="also apply the spread term ψ")
+    t.add_argument("--shift", default="ratio", choices=("ratio", "additive"),
+                   help="how λ moves a bin's pixels: scaled (ratio) or shifted (additive) "
+                        "(default %(default)s)")
+    t.add_argument("--sensor", action="store_true",
+                   help="first the sensor step: vignetting, colour matrix and response fitted on "
+                        "both files' design block means (for a camera; docs/appearance.md)")
+    t.add_argument("--normals", action="store_true",
+                   help="last the normal step: light moved over the normal's azimuth within each θ "
+                        "bin (sharper or blurrier reflections); only for images lit by the "
+                        "characterisation's environment (docs/appearance.md)")
     t.add_argument("--target", dest="reference", type=Path,
                    help="B's own image of the scene: score the result against it")
     t.set_defaults(run=run_transfer)
@@ -192,29 +207,63 @@ def run_render(args) -> int:
     return 0
 
 
+def _statistics(image, geometry, source, target, args):
+    from abs.appearance import transfer
+    from abs.appearance.transfer import normal_step, sensor_step
+
+    sensor = sensor_step(source, target) if args.sensor else None
+    out = transfer(image, geometry, source, target, args.colour_matrix, args.spread, args.shift,
+                   sensor or False, normals=args.normals)
+    # Which classes got the normal step, and the split test that decided it.
+    report = normal_step(source, target, sensor)[1] if args.normals else None
+    return out, {"sensor": sensor.to_json() if sensor else None, "normal_step": report}
+
+
+def _sensor_only(image, geometry, source, target, args):
+    from abs.appearance import transfer
+    from abs.appearance.transfer import sensor_step
+
+    sensor = sensor_step(source, target)
+    return (transfer(image, geometry, source, target, sensor=sensor, theta=False),
+            {"sensor": sensor.to_json(), "normal_step": None})
+
+
+def _histogram(kind):
+    def run(image, geometry, source, target, args):
+        from abs.appearance.histogram import match_global, match_local
+
+        out = {"global": match_global, "local": match_local}[kind](image, geometry, target)
+        return out, {"sensor": None, "normal_step": None}
+    return run
+
+
+# --method: what makes the image look like the target's. Each returns the image and what its
+# fitted steps were (for the summary JSON).
+_METHODS = {"statistics": _statistics, "sensor": _sensor_only,
+            "histogram-global": _histogram("global"), "histogram-local": _histogram("local")}
+
+
 def run_transfer(args) -> int:
-    from abs.appearance import read_characterisation, read_geometry, transfer
-    from abs.appearance.histogram import match_global, match_local
+    from abs.appearance import read_characterisation, read_geometry
     from abs.appearance.score import object_scores
     from abs.errors import InputError
     from abs.io.images import read_image, write_exr, write_png
 
+    if args.out.suffix.lower() != ".exr":
+        raise InputError(args.out, "--out", "expected an .exr file name")
     image = read_image(args.image)
     geometry = read_geometry(args.geometry, image.shape[:2])
     source, target = read_characterisation(args.source), read_characterisation(args.target)
-    if args.method == "statistics":
-        out = transfer(image, geometry, source, target, args.colour_matrix, args.spread)
-    elif args.method == "histogram-global":
-        out = match_global(image, geometry, target)
-    else:
-        out = match_local(image, geometry, target)
-    if args.out.suffix.lower() != ".exr":
-        raise InputError(args.out, "--out", "expected an .exr file name")
+    if args.method != "statistics" and (args.normals or args.sensor or args.colour_matrix != "none"):
+        raise InputError(None, "--method", f"--sensor, --normals and --colour-matrix are steps of "
+                                           f"--method statistics, not of {args.method}")
+    out, steps = _METHODS[args.method](image, geometry, source, target, args)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_exr(args.out, out)
     write_png(args.out.with_suffix(".png"), out)
     summary = {"image": str(args.image), "from": source.renderer, "to": target.renderer,
-               "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread}
+               "method": args.method, "colour_matrix": args.colour_matrix, "spread": args.spread,
+               "shift": args.shift, "normals": args.normals, **steps}
     if args.reference is not None:
         reference = read_image(args.reference)
         if reference.shape != image.shape:
