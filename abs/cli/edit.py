@@ -99,5 +99,10 @@ def run_edit(args) -> int:
     if result.trust is not None:
         print(f"abs edit: fit residual {result.trust['residual_rmse']:.4g} = "
               f"{result.trust['noise_ratio']:.1f} x the photograph's noise")
+        left_out = result.trust.get("highlight_pixels_left_out", 0)
+        if left_out:
+            # A sun's highlight: the fit could not use it, so the light's level rests on the rest.
+            print(f"abs edit: {left_out} pixels of a sharp highlight left out of the fit "
+                  f"(a sun the smooth fitted light cannot hold)")
     print(f"abs edit: {result.material} ({args.method}) -> {out}")
     return 0
