@@ -68,7 +68,7 @@ def test_saturated_single_bounce_round_trips_but_interreflection_differs():
     boxed = _sphere_scene({"type": "diffuse", "reflectance": red}, box=True, walls=tuple(red))
     rgb, delta, error = _difference(boxed, 128)
     # The green channel of red-on-red light: the upsampled red's green tail, squared, is darker
-    # than 0.05² (measured about 20 % darker); it must differ beyond noise.
+    # than 0.05² (measured 18 % darker at 64 spp, 23 % at 128); it must differ beyond noise.
     assert -delta[1] > 5 * error[1], (rgb, delta, error)
     assert -delta[1] / rgb[1] > 0.1, (rgb, delta)
     assert abs(delta[0]) < 0.03 * rgb[0], (rgb, delta)  # red, mostly first bounce, round-trips
