@@ -26,7 +26,7 @@ over its object's median) and image radius (over the half-diagonal), each with i
 summed error; the identity target's "before" is the noise floor.
 
 Scaled down from the paper (120 scenes, 5 samples per class) to run in about 10 minutes on two
-CPU cores: 64x64 pixels, 64 spp for the characterisation, 512 spp for the held-out images.
+CPU cores (the two spectral targets add about 7, a worker process per image): 64x64 pixels, 64 spp for the characterisation, 512 spp for the held-out images.
 
     python benchmarks/appearance_transfer.py [--size 64 --spp 64 --heldout-spp 512]
     python benchmarks/appearance_transfer.py --targets mitsuba,mitsuba-spectral,spectral \

@@ -124,3 +124,17 @@ def test_spectral_option_must_be_a_boolean():
     spec = _sphere_scene({"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]})
     with pytest.raises(InputError, match="--option spectral"):
         renderer("mitsuba", {"spectral": "yes"}).render(spec, WHITE, design_camera(SIZE), 4, 0)
+
+
+def test_worker_replaces_clear_abs_glass_by_stock_dielectric():
+    from abs.appearance.spectral_worker import spectral_scene
+
+    scene = {"type": "scene",
+             "ball": {"type": "sphere", "bsdf": {"type": "abs_dielectric", "ior": [1.45] * 3,
+                                                 "absorption": [0.0] * 3, "roughness": 0.0,
+                                                 "id": "ball_bsdf"}},
+             "paint": {"type": "sphere", "bsdf": {"type": "abs_tabulated", "filename": "x.binary"}}}
+    out = spectral_scene(scene)
+    assert out["ball"]["bsdf"] == {"type": "dielectric", "int_ior": 1.45, "ext_ior": 1.0, "id": "ball_bsdf"}
+    assert out["paint"]["bsdf"] == scene["paint"]["bsdf"]  # registered in spectral form by the worker
+    assert scene["ball"]["bsdf"]["type"] == "abs_dielectric"  # the input is left as it was
