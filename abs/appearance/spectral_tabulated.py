@@ -9,8 +9,9 @@ evaluated as a smooth spectrum before blending.
 
 Upsampling: every entry's RGB value ``c`` (1/sr, may exceed 1) is stored as the coefficients of
 Mitsuba's sRGB spectral model (Jakob and Hanika 2019, ``mi.srgb_model_fetch``) for ``c / s`` and
-a scale ``s = 2 max(c)``, the way Mitsuba upsamples its own unbounded sRGB values; the spectrum
-is ``s · srgb_model_eval(coefficients, λ)``. An entry of a single bounce under a white light thus
+a scale ``s = 2 max(c)``, as pbrt-v4's ``RGBUnboundedSpectrum`` does; the spectrum is
+``s · srgb_model_eval(coefficients, λ)``. (Mitsuba 3.9's own ``srgb`` spectrum cannot do this: it
+clamps a colour above 1 to a flat spectrum of 1, even with ``unbounded``.) An entry of a single bounce under a white light thus
 renders to (nearly) the RGB it had; products along a path differ from RGB products, as they do
 for any spectral renderer. The coefficients (1.46 M entries, about 10 s of scalar look-ups) are
 cached per table file (``<cache>/appearance/<name>.<digest>.srgb.npy``).
@@ -33,7 +34,8 @@ from abs.io.shared_data import cache_dir
 from abs.render.bsdfs.tabulated import PLUGIN_NAME, _axis, rusinkiewicz_angles
 from abs.render.jit import from_numpy
 
-__all__ = ["PLUGIN_NAME", "SpectralTabulatedBSDF", "spectral_coefficients", "register"]
+__all__ = ["PLUGIN_NAME", "SpectralTabulatedBSDF", "spectral_coefficients", "srgb_model",
+           "register"]
 
 if not mi.variant() or not mi.is_spectral:
     raise ImportError(f"{__name__} needs a spectral Mitsuba variant active before import, "
@@ -70,6 +72,27 @@ def spectral_coefficients(table: np.ndarray) -> np.ndarray:
     coeffs = np.array([list(fetch(colour(*map(float, c)))) for c in unique], np.float32)
     out[:, :3] = coeffs[inverse.reshape(-1)]
     return out
+
+
+def srgb_model(coefficients: np.ndarray, wavelengths: np.ndarray) -> np.ndarray:
+    """Mitsuba's sRGB spectral model in numpy (``mi.srgb_model_eval``), times the scale.
+
+    Parameters
+    ----------
+    coefficients : np.ndarray
+        ``(..., 4)``: ``c0, c1, c2`` and the scale ``s``, as :func:`spectral_coefficients` gives.
+    wavelengths : np.ndarray
+        Wavelengths, nm.
+
+    Returns
+    -------
+    np.ndarray
+        ``(..., len(wavelengths))``: ``s · (1/2 + v / (2 sqrt(1 + v²)))``, ``v = (c0 λ + c1) λ + c2``.
+    """
+    c = np.asarray(coefficients, np.float64)[..., None, :]
+    lam = np.asarray(wavelengths, np.float64)
+    v = (c[..., 0] * lam + c[..., 1]) * lam + c[..., 2]
+    return c[..., 3] * (0.5 + 0.5 * v / np.sqrt(1.0 + v * v))
 
 
 def _cached_coefficients(path: Path) -> np.ndarray:

@@ -42,6 +42,35 @@ def decode(value):
     return value
 
 
+# The grid on which an unbounded RGB parameter is given to Mitsuba as a spectrum, nm.
+_LAMBDA_MIN, _LAMBDA_MAX, _LAMBDA_STEP = 360.0, 830.0, 5.0
+
+
+def _unbounded(value, where: str):
+    """``value`` with every ``{"type": "rgb"}`` above 1 given as a ``regular`` spectrum.
+
+    Mitsuba 3.9 in a spectral variant turns an RGB parameter into its ``srgb`` reflectance
+    spectrum, which silently clamps values above 1 to a flat 1: a conductor's ``eta`` [3.2, 2.7,
+    2.3] and ``k`` [3.3, 3.2, 3.1] would render as eta = k = 1 (measured: 60-77 % darker metals
+    than the RGB render under a white sky). Such a value is upsampled here instead, with the
+    same model and scale as the MERL tables (:func:`abs.appearance.spectral_tabulated.
+    spectral_coefficients`), and sampled every 5 nm over 360-830 nm.
+    """
+    if isinstance(value, dict):
+        if value.get("type") == "rgb" and max(map(float, value["value"])) > 1.0:
+            from abs.appearance.spectral_tabulated import spectral_coefficients, srgb_model
+
+            import numpy as np
+
+            rgb = np.asarray(value["value"], np.float64).reshape(3, 1)
+            lam = np.arange(_LAMBDA_MIN, _LAMBDA_MAX + 0.5 * _LAMBDA_STEP, _LAMBDA_STEP)
+            spectrum = srgb_model(spectral_coefficients(rgb)[0], lam)
+            return {"type": "regular", "wavelength_min": _LAMBDA_MIN, "wavelength_max": _LAMBDA_MAX,
+                    "values": ", ".join(f"{x:.6g}" for x in spectrum)}
+        return {key: _unbounded(item, f"{where}.{key}") for key, item in value.items()}
+    return value
+
+
 def _spectral_bsdf(bsdf: dict, where: str) -> dict:
     """A BSDF of the scene as the spectral variant can load it.
 
@@ -49,7 +78,8 @@ def _spectral_bsdf(bsdf: dict, where: str) -> dict:
     Mitsuba's ``dielectric`` when it is the same in every channel, clear and smooth (all the
     appearance design's glass); ``abs_tabulated`` is kept, registered here in its spectral form
     (:mod:`abs.appearance.spectral_tabulated`); stock plugins pass unchanged (Mitsuba upsamples
-    their RGB values itself).
+    their RGB values itself) except RGB values above 1, which Mitsuba would clamp
+    (:func:`_unbounded`).
     """
     kind = bsdf.get("type")
     if kind == "abs_dielectric":
@@ -62,7 +92,7 @@ def _spectral_bsdf(bsdf: dict, where: str) -> dict:
                 **({"id": bsdf["id"]} if "id" in bsdf else {})}
     if isinstance(kind, str) and kind.startswith("abs_") and kind != "abs_tabulated":
         raise JobError(f"{where}: abs's plugin {kind!r} has no spectral form")
-    return bsdf
+    return _unbounded(bsdf, where)
 
 
 def spectral_scene(scene: dict) -> dict:
