@@ -8,7 +8,8 @@ file (:mod:`~abs.appearance.files`), and used to make an image of one renderer l
 would, pixel by pixel by material id and θ (:mod:`~abs.appearance.transfer`). Histogram matching
 (:mod:`~abs.appearance.histogram`) is the baseline; the metric is the structured-light study's
 CIEDE2000 (:mod:`~abs.appearance.score`). Second renderers are registered by name
-(:mod:`~abs.appearance.renderers`): a reconfigured Mitsuba and a simulated camera. Beyond α, λ,
+(:mod:`~abs.appearance.renderers`): a reconfigured Mitsuba (optionally spectral, rendered in a
+worker process: :mod:`~abs.appearance.spectral`) and a simulated camera. Beyond α, λ,
 ψ, two optional steps reach what they cannot: the sensor step (:mod:`~abs.appearance.sensor`:
 vignetting, colour matrix and response, by radiance and image position) and the normal step
 (:mod:`~abs.appearance.normals`: light moved over the normal's azimuth within a θ bin).

@@ -7,7 +7,8 @@ options (``--option key=value`` on the command line) are checked against its ``d
 - ``abs``: abs's path tracer (:class:`abs.render.PathTracer`), the reference.
 - ``mitsuba``: stock Mitsuba configured differently, the way another tool differs from abs: the
   ``path`` integrator at a low ``max_depth``, GGX ``alpha = roughness²`` where abs uses
-  ``alpha = roughness``, thin instead of solid glass, and a white-balance and exposure offset.
+  ``alpha = roughness``, thin instead of solid glass, and a white-balance and exposure offset;
+  with ``spectral=true``, rendered in a spectral variant (in a worker process).
 - ``camera``: abs's rendering seen through a simulated camera (vignetting, a colour matrix, a
   compressive response curve with a black level); the characterisation knows nothing of these
   parameters, it only sees the images.
@@ -24,6 +25,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.appearance.scenes import scene_dict
+from abs.appearance.spectral import render_spectral
 from abs.errors import InputError
 from abs.render.bsdfs import tabulated as _tabulated  # noqa: F401  (registers abs_tabulated)
 from abs.render.camera import Camera
@@ -111,9 +113,21 @@ def _reconfigure_bsdf(bsdf: dict, squared_roughness: bool, thin_glass: bool) -> 
 
 @register
 class MitsubaRenderer(Renderer):
+    """Stock Mitsuba, reconfigured; ``spectral=true`` renders in a spectral variant.
+
+    Spectral rendering is an option of this renderer rather than a renderer of its own because
+    it is one more setting of the same tool, and it composes with the others: ``spectral=true``
+    alone with the other options at abs's values isolates it, with the defaults it is the
+    reconfigured Mitsuba rendered spectrally. It runs in a worker process
+    (:mod:`abs.appearance.spectral`), since abs's process holds ``llvm_ad_rgb``;
+    ``spectral_variant`` names the variant (``llvm_ad_spectral``). The MERL-table class keeps
+    its table, upsampled per entry (:mod:`abs.appearance.spectral_tabulated`).
+    """
+
     name = "mitsuba"
     defaults = {"max_depth": 3, "squared_roughness": True, "thin_glass": True,
-                "white_balance": [1.12, 1.0, 0.86], "exposure": 0.8}
+                "white_balance": [1.12, 1.0, 0.86], "exposure": 0.8, "spectral": False,
+                "spectral_variant": "llvm_ad_spectral"}
 
     def render(self, spec, environment, camera, spp, seed):
         o = self.options
@@ -122,10 +136,18 @@ class MitsubaRenderer(Renderer):
             if isinstance(value, dict) and "bsdf" in value and key.startswith("object"):
                 value["bsdf"] = _reconfigure_bsdf(value["bsdf"], bool(o["squared_roughness"]),
                                                   bool(o["thin_glass"]))
-        d["emitter"] = {"type": "envmap", "bitmap": mi.Bitmap(np.asarray(environment, np.float32))}
         d["integrator"] = {"type": "path", "max_depth": int(o["max_depth"])}
         d["sensor"] = mitsuba_sensor(camera)
-        image = np.asarray(mi.render(mi.load_dict(d), spp=spp, seed=seed), np.float32)
+        if not isinstance(o["spectral"], bool):
+            raise InputError(None, "--option spectral", f"renderer {self.name!r}: expected true "
+                                                        f"or false, got {o['spectral']!r}")
+        if o["spectral"]:
+            image = render_spectral(d, environment, spp, seed, variant=str(o["spectral_variant"]),
+                                    field=f"renderer {self.name!r} --option spectral=true")
+        else:
+            d["emitter"] = {"type": "envmap",
+                            "bitmap": mi.Bitmap(np.asarray(environment, np.float32))}
+            image = np.asarray(mi.render(mi.load_dict(d), spp=spp, seed=seed), np.float32)
         gains = np.asarray(o["white_balance"], np.float32) * np.float32(o["exposure"])
         return image[..., :3] * gains
 

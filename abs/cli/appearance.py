@@ -33,7 +33,8 @@ def add_parser(sub) -> None:
     verbs = p.add_subparsers(dest="verb", required=True)
 
     def scene_options(q):
-        q.add_argument("--renderer", required=True, help="registered renderer (abs, mitsuba, camera, gains)")
+        q.add_argument("--renderer", required=True, help="registered renderer (abs, mitsuba, camera, gains; "
+                                                     "mitsuba --option spectral=true renders spectrally)")
         q.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                        help="renderer option (VALUE as JSON, e.g. gains=[1.2,1,0.8]); repeatable")
         q.add_argument("--out", type=Path, required=True, help="folder to write to")

@@ -1,0 +1,208 @@
+"""abs's MERL-table BSDF in a spectral Mitsuba variant: each RGB table entry upsampled to a spectrum.
+
+abs's ``abs_tabulated`` (:mod:`abs.render.bsdfs.tabulated`) returns an RGB triple per lookup; in a
+spectral variant a BSDF must return its value at the path's sampled wavelengths, so that plugin
+cannot run there (Mitsuba refuses it: it is registered for the RGB variant it was defined under).
+This module defines the same BSDF for a spectral variant: the same Rusinkiewicz lookup and
+trilinear blend (imported from the RGB plugin), but each of the 8 neighbouring table entries is
+evaluated as a smooth spectrum before blending.
+
+Upsampling: every entry's RGB value ``c`` (1/sr, may exceed 1) is stored as the coefficients of
+Mitsuba's sRGB spectral model (Jakob and Hanika 2019, ``mi.srgb_model_fetch``) for ``c / s`` and
+a scale ``s = 2 max(c)``, as pbrt-v4's ``RGBUnboundedSpectrum`` does; the spectrum is
+``s · srgb_model_eval(coefficients, λ)``. (Mitsuba 3.9's own ``srgb`` spectrum cannot do this: it
+clamps a colour above 1 to a flat spectrum of 1, even with ``unbounded``.) An entry of a single bounce under a white light thus
+renders to (nearly) the RGB it had; products along a path differ from RGB products, as they do
+for any spectral renderer. The coefficients (1.46 M entries, about 10 s of scalar look-ups) are
+cached per table file (``<cache>/appearance/<name>.<digest>.srgb.npy``).
+
+Import this module only after a spectral variant is active: the class subclasses that variant's
+``mi.BSDF``. Plugin name: ``abs_tabulated`` (registered for the spectral variant only).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from abs.io.merl import MERL_SHAPE, read_merl
+from abs.io.shared_data import cache_dir
+from abs.render.bsdfs.tabulated import PLUGIN_NAME, _axis, rusinkiewicz_angles
+from abs.render.jit import from_numpy
+
+__all__ = ["PLUGIN_NAME", "SpectralTabulatedBSDF", "spectral_coefficients", "srgb_model",
+           "register"]
+
+if not mi.variant() or not mi.is_spectral:
+    raise ImportError(f"{__name__} needs a spectral Mitsuba variant active before import, "
+                      f"not {mi.variant()!r}")
+
+_N_TH, _N_TD, _N_PD = MERL_SHAPE[1:]
+_COEFFS = 4  # three sRGB-model coefficients and the scale, per table entry
+
+
+def spectral_coefficients(table: np.ndarray) -> np.ndarray:
+    """Per-entry sRGB spectral-model coefficients and scale of an RGB BRDF table.
+
+    Parameters
+    ----------
+    table : np.ndarray
+        ``(3, N)`` or flat ``3 N`` RGB values (1/sr), MERL order (channel-major).
+
+    Returns
+    -------
+    np.ndarray
+        ``(N, 4)`` float32: coefficients ``c0, c1, c2`` of ``mi.srgb_model_eval`` for ``c / s`` and
+        the scale ``s = 2 max(c)`` (negative entries clamped to 0, a black entry has ``s = 0``).
+    """
+    rgb = np.maximum(np.asarray(table, np.float64).reshape(3, -1).T, 0.0)
+    scale = 2.0 * rgb.max(axis=1)
+    safe = np.where(scale > 0, scale, 1.0)
+    unit = rgb / safe[:, None]
+    out = np.zeros((len(rgb), _COEFFS), np.float32)
+    out[:, 3] = scale
+    fetch, colour = mi.srgb_model_fetch, mi.ScalarColor3f
+    # The model is a precomputed 3D table inside Mitsuba reachable only per scalar colour; equal
+    # colours (the many exact zeros, repeated entries) are looked up once.
+    unique, inverse = np.unique(unit.astype(np.float32), axis=0, return_inverse=True)
+    coeffs = np.array([list(fetch(colour(*map(float, c)))) for c in unique], np.float32)
+    out[:, :3] = coeffs[inverse.reshape(-1)]
+    return out
+
+
+def srgb_model(coefficients: np.ndarray, wavelengths: np.ndarray) -> np.ndarray:
+    """Mitsuba's sRGB spectral model in numpy (``mi.srgb_model_eval``), times the scale.
+
+    Parameters
+    ----------
+    coefficients : np.ndarray
+        ``(..., 4)``: ``c0, c1, c2`` and the scale ``s``, as :func:`spectral_coefficients` gives.
+    wavelengths : np.ndarray
+        Wavelengths, nm.
+
+    Returns
+    -------
+    np.ndarray
+        ``(..., len(wavelengths))``: ``s · (1/2 + v / (2 sqrt(1 + v²)))``, ``v = (c0 λ + c1) λ + c2``.
+    """
+    c = np.asarray(coefficients, np.float64)[..., None, :]
+    lam = np.asarray(wavelengths, np.float64)
+    v = (c[..., 0] * lam + c[..., 1]) * lam + c[..., 2]
+    return c[..., 3] * (0.5 + 0.5 * v / np.sqrt(1.0 + v * v))
+
+
+def _cached_coefficients(path: Path) -> np.ndarray:
+    data = path.read_bytes()
+    digest = hashlib.sha256(data).hexdigest()[:16]
+    cached = cache_dir("appearance") / f"{path.stem}.{digest}.srgb.npy"
+    if cached.is_file():
+        return np.load(cached, allow_pickle=False)
+    coefficients = spectral_coefficients(read_merl(path))
+    tmp = cached.with_suffix(".tmp.npy")
+    np.save(tmp, coefficients, allow_pickle=False)
+    tmp.replace(cached)  # a concurrent reader never sees half a file
+    return coefficients
+
+
+class SpectralTabulatedBSDF(mi.BSDF):
+    """The MERL-table BSDF of :mod:`abs.render.bsdfs.tabulated` for a spectral variant.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        ``filename``: a MERL ``.binary`` file (required here: there is no table to set through
+        ``mi.traverse``; the spectral renderer is not differentiated).
+
+    Notes
+    -----
+    Same conventions as the RGB plugin: ``eval`` returns f · cos θo, cosine-weighted sampling,
+    flags ``DiffuseReflection | FrontSide``.
+    """
+
+    def __init__(self, props: mi.Properties):
+        mi.BSDF.__init__(self, props)
+        if "filename" not in props:
+            raise ValueError(f"{PLUGIN_NAME} (spectral): a 'filename' is required")
+        path = Path(str(mi.file_resolver().resolve(str(props["filename"]))))
+        self.filename = str(path)
+        self.coefficients = from_numpy(mi.Float, _cached_coefficients(path).reshape(-1))
+        dr.make_opaque(self.coefficients)
+        flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        self.m_components = [flags]
+        self.m_flags = flags
+
+    def _entry(self, index: mi.UInt32, wavelengths, active: mi.Bool):
+        """The spectrum of table entry ``index`` at ``wavelengths`` (1/sr)."""
+        c = [dr.gather(mi.Float, self.coefficients, index * _COEFFS + k, active) for k in range(_COEFFS)]
+        return mi.srgb_model_eval(mi.Vector3f(c[0], c[1], c[2]), wavelengths) * c[3]
+
+    def _lookup(self, si: mi.SurfaceInteraction3f, wo: mi.Vector3f, active: mi.Bool):
+        # The same coordinates as the RGB plugin's _lookup; only the entry values differ.
+        theta_h, theta_d, phi_d = rusinkiewicz_angles(si.wi, wo)
+        phi_d = dr.select(phi_d < 0.0, phi_d + dr.pi, phi_d)
+        h0, h1, th = _axis(_N_TH * dr.sqrt(dr.maximum(theta_h, 0.0) * (2.0 / dr.pi)), _N_TH)
+        d0, d1, td = _axis(theta_d * (_N_TD * 2.0 / dr.pi), _N_TD)
+        p_coord = dr.clip(phi_d * (_N_PD / dr.pi), 0.0, float(_N_PD))
+        p_floor = dr.minimum(mi.UInt32(dr.floor(p_coord)), _N_PD)
+        tp = p_coord - mi.Float(p_floor)
+        p0 = p_floor % _N_PD
+        p1 = (p_floor + 1) % _N_PD
+        value = mi.Spectrum(0.0)
+        for hi, wh in ((h0, 1.0 - th), (h1, th)):
+            for di, wd in ((d0, 1.0 - td), (d1, td)):
+                row = (hi * _N_TD + di) * _N_PD
+                for pi, wp in ((p0, 1.0 - tp), (p1, tp)):
+                    value += (wh * wd * wp) * self._entry(row + pi, si.wavelengths, active)
+        return value
+
+    def _eval(self, si, wo, active):
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        active = active & (cos_i > 0.0) & (cos_o > 0.0)
+        value = self._lookup(si, wo, active) * cos_o
+        return dr.select(active, value, 0.0), active
+
+    def eval(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Spectrum(0.0)
+        return self._eval(si, wo, mi.Bool(active))[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Float(0.0)
+        active = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0)
+        active &= mi.Frame3f.cos_theta(wo) > 0.0
+        return dr.select(active, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        value, valid = self._eval(si, wo, mi.Bool(active))
+        return value, dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return bs, mi.Spectrum(0.0)
+        wo = mi.warp.square_to_cosine_hemisphere(sample2)
+        value, valid = self._eval(si, wo, mi.Bool(active))
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
+        valid &= pdf > 0.0
+        bs.wo = wo
+        bs.pdf = dr.select(valid, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, dr.select(valid, value / dr.maximum(pdf, 1e-20), 0.0)
+
+    def to_string(self) -> str:
+        return f"SpectralTabulatedBSDF[table={self.filename}]"
+
+
+def register() -> None:
+    """Register ``abs_tabulated`` for the active (spectral) variant."""
+    mi.register_bsdf(PLUGIN_NAME, lambda props: SpectralTabulatedBSDF(props))
