@@ -299,6 +299,24 @@ def test_unknown_renderer_and_option():
 
 # -- command line -----------------------------------------------------------------------------
 
+def test_the_reconfigured_mitsuba_makes_every_clear_glass_thin():
+    # The design's smooth glass compiles to abs's own plugin (abs_dielectric), its rough glass to
+    # Mitsuba's roughdielectric: "thin instead of solid glass" must reach both (it once reached
+    # only the rough one). Glass with absorption has no thin equivalent and stays solid.
+    from abs.appearance.renderers import _reconfigure_bsdf
+    from abs.appearance.scenes import material_bsdf
+
+    smooth = material_bsdf({"type": "dielectric", "ior": 1.45}, "object1")
+    assert smooth["type"] == "abs_dielectric"
+    thin = _reconfigure_bsdf({**smooth, "id": "g"}, squared_roughness=True, thin_glass=True)
+    assert thin == {"type": "thindielectric", "int_ior": 1.45, "ext_ior": 1.0, "id": "g"}
+    rough = material_bsdf({"type": "roughdielectric", "ior": 1.5, "roughness": 0.1}, "object2")
+    assert _reconfigure_bsdf(rough, True, True)["type"] == "thindielectric"
+    tinted = {**smooth, "absorption": [1.0, 2.0, 3.0]}
+    assert _reconfigure_bsdf(tinted, True, True) == tinted
+    assert _reconfigure_bsdf(smooth, True, False) == smooth
+
+
 def test_cli_characterise_and_transfer(tmp_path, capsys):
     from abs.cli.main import main
 

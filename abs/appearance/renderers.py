@@ -108,6 +108,14 @@ def _reconfigure_bsdf(bsdf: dict, squared_roughness: bool, thin_glass: bool) -> 
     if thin_glass and bsdf["type"] in ("dielectric", "roughdielectric"):
         bsdf = {"type": "thindielectric", "int_ior": bsdf["int_ior"], "ext_ior": bsdf["ext_ior"],
                 **({"id": bsdf["id"]} if "id" in bsdf else {})}
+    elif thin_glass and bsdf["type"] == "abs_dielectric":
+        # abs's smooth glass (its scene type "dielectric" compiles to abs's own plugin): the
+        # other tool's thin sheet of the same IOR. Only clear, non-dispersive glass has one.
+        ior = np.broadcast_to(np.asarray(bsdf.get("ior", 1.5), np.float64), 3)
+        clear = not np.any(np.asarray(bsdf.get("absorption", 0.0), np.float64))
+        if np.ptp(ior) == 0 and clear and float(bsdf.get("roughness", 0.0)) == 0.0:
+            bsdf = {"type": "thindielectric", "int_ior": float(ior[0]), "ext_ior": 1.0,
+                    **({"id": bsdf["id"]} if "id" in bsdf else {})}
     return bsdf
 
 
