@@ -61,9 +61,6 @@ def test_true_absorption_lies_within_the_posterior(glass_scene_dir, capture, tmp
     # Absorption reweights from path-length recordings: the chain's 240 evaluations render
     # nothing; the renders are the noise model's, the calibration's and the predictive draws'.
     assert result.renders < 60 and len(result.predictive) == 2
-    # ... recorded at the starting point's absorption, so that they make the Russian-roulette
-    # decisions a render near the mode makes (docs/sampling.md).
-    np.testing.assert_allclose(result.summary()["recording_absorption_per_m"], entry["value"])
     # The minutes before the first chain step are reported, in order (the fit was given).
     assert stages == ["noise model at the starting point", "mode of the likelihood",
                       "noise model at the mode", "render-noise calibration (8 seed pairs)", "chain",

@@ -81,11 +81,6 @@ class FitProblem:
     reweight : bool
         Use path-length recordings (:mod:`abs.render.path_lengths`) when some fitted parameter
         reweights from one (:attr:`reweightable`).
-    recording_absorption : tuple of float or None
-        Absorption (1/m, per channel) of :attr:`recorded_material` while recordings are made;
-        ``None``: 0, the lowest value a fit may visit, so that every reweighting attenuates. A
-        sampler records at its starting point instead (``abs.sampling.sample``): its renders and
-        its recordings then make the same Russian-roulette decisions near the mode.
     """
 
     compiled: CompiledScene
@@ -95,7 +90,6 @@ class FitProblem:
     max_depth: int | None = None
     counter: RenderCounter = field(default_factory=RenderCounter)
     reweight: bool = True
-    recording_absorption: tuple[float, float, float] | None = None
     _recordings: OrderedDict = field(default_factory=OrderedDict, repr=False)
 
     @property
@@ -149,15 +143,13 @@ class FitProblem:
 
     def _recording(self, observation: Observation, spp: int, seed: int):
         """The recording of one view with ``(spp, seed)``, made on first use (one render)."""
-        key = (observation.name, spp, seed, self._fingerprint(), self.recording_absorption)
+        key = (observation.name, spp, seed, self._fingerprint())
         if key in self._recordings:
             self._recordings.move_to_end(key)
             return self._recordings[key]
         material = self.recorded_material
         recording = self.compiled.record(observation.camera, spp, seed, material=material,
-                                         max_depth=self.max_depth,
-                                         absorption_per_m=(0.0 if self.recording_absorption is None
-                                                           else self.recording_absorption))
+                                         max_depth=self.max_depth)
         self.counter.add(observation.camera, spp)
         self._recordings[key] = recording
         while (len(self._recordings) > 1

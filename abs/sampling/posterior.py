@@ -129,9 +129,6 @@ class RenderPosterior:
     reweight : bool
         Evaluate from path-length recordings where the parameters allow (the two seeds'
         recordings are made once and reweighted at every ``theta``).
-    recording_absorption : tuple of float or None
-        The absorption (1/m) those recordings are made at
-        (:attr:`abs.model.problem.FitProblem.recording_absorption`); ``None``: 0.
     """
 
     scene: object
@@ -146,7 +143,6 @@ class RenderPosterior:
     variant: str | None = None
     offset: np.ndarray | None = None
     reweight: bool = True
-    recording_absorption: tuple[float, float, float] | None = None
     token: str = field(default_factory=lambda: uuid.uuid4().hex)
 
     def problem(self):
@@ -161,9 +157,7 @@ class RenderPosterior:
 
             scene = Path(self.scene) if isinstance(self.scene, str) else self.scene
             model = build_model(scene, self.capture, self.names, reweight=self.reweight)
-            problem = model.problem("train", self.downsample, self.clamp)
-            problem.recording_absorption = self.recording_absorption
-            self.adopt(problem)
+            self.adopt(model.problem("train", self.downsample, self.clamp))
         return _LOCAL.problems[self.token]
 
     def adopt(self, problem) -> None:

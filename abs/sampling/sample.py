@@ -184,10 +184,6 @@ class SampleResult:
             "spp": self.settings.spp,
             "downsample": self.settings.downsample,
         }
-        recorded = None if self.posterior is None else self.posterior.recording_absorption
-        if recorded is not None:
-            # Path-length recordings were made at this absorption (1/m; docs/sampling.md).
-            summary["recording_absorption_per_m"] = list(recorded)
         return {**summary, "checks": run_checks(summary)}
 
 
@@ -400,22 +396,11 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
     prior = LogPrior.from_vector(vector, {n: p for n, p in scene.fit_priors.items() if n in names})
     seeds = (settings.seed + 1, settings.seed + 2)
 
-    # Recordings are made at the starting point's absorption, not at 0 as a fit's are: the
-    # rendered likelihood (--no-reweight) renders near the mode with the same seeds, and a
-    # recording made there makes the same Russian-roulette decisions, so the two chains sample
-    # the same fixed-seed likelihood, not two realisations of it. Walkers below that absorption
-    # boost long paths by exp(dsigma L), a few per cent within the posterior's width.
-    material = problem.recorded_material if problem.reweightable else None
-    key = f"{material}.absorption"
-    if material is not None and key in names:
-        problem.recording_absorption = tuple(float(v) for v in
-                                             np.maximum(vector.split(theta_fit)[key], 0.0))
-
     def posterior_with(noise: NoiseModel, offset: np.ndarray | None = None) -> RenderPosterior:
         posterior = RenderPosterior(scene, str(capture), tuple(names), settings.spp,
                                     settings.downsample, seeds, noise.residual_variance(masks),
                                     prior, settings.clamp, variant or mi.variant(), offset,
-                                    settings.reweight, problem.recording_absorption)
+                                    settings.reweight)
         posterior.adopt(problem)
         return posterior
 
