@@ -29,9 +29,9 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from abs.io.merl import MERL_SHAPE, read_merl
+from abs.io.merl import read_merl
 from abs.io.shared_data import cache_dir
-from abs.render.bsdfs.tabulated import PLUGIN_NAME, _axis, rusinkiewicz_angles
+from abs.render.bsdfs.tabulated import PLUGIN_NAME, CosineSampledTable, table_corners
 from abs.render.jit import from_numpy
 
 __all__ = ["PLUGIN_NAME", "SpectralTabulatedBSDF", "spectral_coefficients", "srgb_model",
@@ -41,7 +41,6 @@ if not mi.variant() or not mi.is_spectral:
     raise ImportError(f"{__name__} needs a spectral Mitsuba variant active before import, "
                       f"not {mi.variant()!r}")
 
-_N_TH, _N_TD, _N_PD = MERL_SHAPE[1:]
 _COEFFS = 4  # three sRGB-model coefficients and the scale, per table entry
 
 
@@ -141,63 +140,17 @@ class SpectralTabulatedBSDF(mi.BSDF):
         return mi.srgb_model_eval(mi.Vector3f(c[0], c[1], c[2]), wavelengths) * c[3]
 
     def _lookup(self, si: mi.SurfaceInteraction3f, wo: mi.Vector3f, active: mi.Bool):
-        # The same coordinates as the RGB plugin's _lookup; only the entry values differ.
-        theta_h, theta_d, phi_d = rusinkiewicz_angles(si.wi, wo)
-        phi_d = dr.select(phi_d < 0.0, phi_d + dr.pi, phi_d)
-        h0, h1, th = _axis(_N_TH * dr.sqrt(dr.maximum(theta_h, 0.0) * (2.0 / dr.pi)), _N_TH)
-        d0, d1, td = _axis(theta_d * (_N_TD * 2.0 / dr.pi), _N_TD)
-        p_coord = dr.clip(phi_d * (_N_PD / dr.pi), 0.0, float(_N_PD))
-        p_floor = dr.minimum(mi.UInt32(dr.floor(p_coord)), _N_PD)
-        tp = p_coord - mi.Float(p_floor)
-        p0 = p_floor % _N_PD
-        p1 = (p_floor + 1) % _N_PD
+        # The RGB plugin's coordinates and weights; only the entries' values differ (spectra).
         value = mi.Spectrum(0.0)
-        for hi, wh in ((h0, 1.0 - th), (h1, th)):
-            for di, wd in ((d0, 1.0 - td), (d1, td)):
-                row = (hi * _N_TD + di) * _N_PD
-                for pi, wp in ((p0, 1.0 - tp), (p1, tp)):
-                    value += (wh * wd * wp) * self._entry(row + pi, si.wavelengths, active)
+        for index, weight in table_corners(si.wi, wo):
+            value += weight * self._entry(index, si.wavelengths, active)
         return value
 
-    def _eval(self, si, wo, active):
-        cos_i = mi.Frame3f.cos_theta(si.wi)
-        cos_o = mi.Frame3f.cos_theta(wo)
-        active = active & (cos_i > 0.0) & (cos_o > 0.0)
-        value = self._lookup(si, wo, active) * cos_o
-        return dr.select(active, value, 0.0), active
-
-    def eval(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Spectrum(0.0)
-        return self._eval(si, wo, mi.Bool(active))[0]
-
-    def pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Float(0.0)
-        active = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0)
-        active &= mi.Frame3f.cos_theta(wo) > 0.0
-        return dr.select(active, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-
-    def eval_pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Spectrum(0.0), mi.Float(0.0)
-        value, valid = self._eval(si, wo, mi.Bool(active))
-        return value, dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        bs = dr.zeros(mi.BSDFSample3f)
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return bs, mi.Spectrum(0.0)
-        wo = mi.warp.square_to_cosine_hemisphere(sample2)
-        value, valid = self._eval(si, wo, mi.Bool(active))
-        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
-        valid &= pdf > 0.0
-        bs.wo = wo
-        bs.pdf = dr.select(valid, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-        bs.sampled_component = mi.UInt32(0)
-        return bs, dr.select(valid, value / dr.maximum(pdf, 1e-20), 0.0)
+    _eval = CosineSampledTable._eval
+    eval = CosineSampledTable.eval
+    pdf = CosineSampledTable.pdf
+    eval_pdf = CosineSampledTable.eval_pdf
+    sample = CosineSampledTable.sample
 
     def to_string(self) -> str:
         return f"SpectralTabulatedBSDF[table={self.filename}]"

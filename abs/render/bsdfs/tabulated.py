@@ -39,7 +39,8 @@ import mitsuba as mi  # noqa: E402
 from abs.io.merl import MERL_SHAPE, MERL_SIZE, read_merl  # noqa: E402
 from abs.render.jit import from_numpy  # noqa: E402
 
-__all__ = ["PLUGIN_NAME", "TABLE_KEY", "TabulatedBSDF", "register", "rusinkiewicz_angles"]
+__all__ = ["PLUGIN_NAME", "TABLE_KEY", "TabulatedBSDF", "CosineSampledTable", "register",
+           "rusinkiewicz_angles", "table_corners"]
 
 PLUGIN_NAME = "abs_tabulated"
 TABLE_KEY = "table"
@@ -93,6 +94,96 @@ def _axis(coord: mi.Float, n: int) -> tuple[mi.UInt32, mi.UInt32, mi.Float]:
     return lo, lo + 1, coord - mi.Float(lo)
 
 
+def table_corners(wi: mi.Vector3f, wo: mi.Vector3f) -> list[tuple[mi.UInt32, mi.Float]]:
+    """The 8 table entries around a direction pair and their trilinear weights.
+
+    Parameters
+    ----------
+    wi, wo : mi.Vector3f
+        Unit local directions (module docstring: ``wo`` is the difference vector).
+
+    Returns
+    -------
+    list of (mi.UInt32, mi.Float)
+        Entry index within one channel's block (θh-major, then θd, then φd) and its weight; the
+        weights sum to 1.
+    """
+    theta_h, theta_d, phi_d = rusinkiewicz_angles(wi, wo)
+    phi_d = dr.select(phi_d < 0.0, phi_d + dr.pi, phi_d)
+
+    h0, h1, th = _axis(_N_TH * dr.sqrt(dr.maximum(theta_h, 0.0) * (2.0 / dr.pi)), _N_TH)
+    d0, d1, td = _axis(theta_d * (_N_TD * 2.0 / dr.pi), _N_TD)
+    # φd is periodic over π: wrap instead of clamp.
+    p_coord = dr.clip(phi_d * (_N_PD / dr.pi), 0.0, float(_N_PD))
+    p_floor = dr.minimum(mi.UInt32(dr.floor(p_coord)), _N_PD)
+    tp = p_coord - mi.Float(p_floor)
+    p0 = p_floor % _N_PD
+    p1 = (p_floor + 1) % _N_PD
+
+    corners = []
+    for hi, wh in ((h0, 1.0 - th), (h1, th)):
+        for di, wd in ((d0, 1.0 - td), (d1, td)):
+            row = (hi * _N_TD + di) * _N_PD
+            for pi, wp in ((p0, 1.0 - tp), (p1, tp)):
+                corners.append((row + pi, wh * wd * wp))
+    return corners
+
+
+class CosineSampledTable:
+    """``eval``, ``pdf``, ``eval_pdf`` and ``sample`` of a one-sided BRDF known by lookup.
+
+    For a ``mi.BSDF`` subclass of the active variant that defines ``_lookup(si, wo, active)``
+    (the BRDF in 1/sr, no cosine, as ``mi.Spectrum``): this plugin, and its spectral port in
+    :mod:`abs.appearance.spectral_tabulated`, which must subclass a spectral variant's
+    ``mi.BSDF`` in another process. A nanobind type takes one base only, so the plugins take
+    these methods as class attributes (``eval = CosineSampledTable.eval``) rather than
+    inheriting them. ``eval`` returns f · cos θo (Mitsuba's convention); sampling is
+    cosine-weighted over the upper hemisphere, so a sample's weight is f · π; both directions
+    must be above the horizon.
+    """
+
+    def _eval(self, si, wo, active):
+        """f · cos θo and the mask of pairs with both directions above the horizon."""
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        active = active & (cos_i > 0.0) & (cos_o > 0.0)
+        value = self._lookup(si, wo, active) * cos_o
+        return dr.select(active, value, 0.0), active
+
+    def eval(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Spectrum(0.0)
+        return self._eval(si, wo, mi.Bool(active))[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Float(0.0)
+        active = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0)
+        active &= mi.Frame3f.cos_theta(wo) > 0.0
+        return dr.select(active, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        value, valid = self._eval(si, wo, mi.Bool(active))
+        return value, dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
+            return bs, mi.Spectrum(0.0)
+        wo = mi.warp.square_to_cosine_hemisphere(sample2)
+        value, valid = self._eval(si, wo, mi.Bool(active))
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
+        valid &= pdf > 0.0
+        bs.wo = wo
+        bs.pdf = dr.select(valid, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, dr.select(valid, value / dr.maximum(pdf, 1e-20), 0.0)
+
+
 class TabulatedBSDF(mi.BSDF):
     """Isotropic, reciprocal, front-side BRDF given by a MERL-layout table (1/sr).
 
@@ -140,26 +231,10 @@ class TabulatedBSDF(mi.BSDF):
         dr.make_opaque(self.table)
 
     # -- evaluation -----------------------------------------------------------------------------
-    def _lookup(self, wi: mi.Vector3f, wo: mi.Vector3f, active: mi.Bool) -> mi.Color3f:
+    def _lookup(self, si: mi.SurfaceInteraction3f, wo: mi.Vector3f,
+                active: mi.Bool) -> mi.Color3f:
         """Trilinearly interpolated BRDF (1/sr, no cosine) for local directions."""
-        theta_h, theta_d, phi_d = rusinkiewicz_angles(wi, wo)
-        phi_d = dr.select(phi_d < 0.0, phi_d + dr.pi, phi_d)
-
-        h0, h1, th = _axis(_N_TH * dr.sqrt(dr.maximum(theta_h, 0.0) * (2.0 / dr.pi)), _N_TH)
-        d0, d1, td = _axis(theta_d * (_N_TD * 2.0 / dr.pi), _N_TD)
-        # φd is periodic over π: wrap instead of clamp.
-        p_coord = dr.clip(phi_d * (_N_PD / dr.pi), 0.0, float(_N_PD))
-        p_floor = dr.minimum(mi.UInt32(dr.floor(p_coord)), _N_PD)
-        tp = p_coord - mi.Float(p_floor)
-        p0 = p_floor % _N_PD
-        p1 = (p_floor + 1) % _N_PD
-
-        corners = []
-        for hi, wh in ((h0, 1.0 - th), (h1, th)):
-            for di, wd in ((d0, 1.0 - td), (d1, td)):
-                row = (hi * _N_TD + di) * _N_PD
-                for pi, wp in ((p0, 1.0 - tp), (p1, tp)):
-                    corners.append((row + pi, wh * wd * wp))
+        corners = table_corners(si.wi, wo)
 
         channels = []
         for c in range(3):
@@ -169,50 +244,11 @@ class TabulatedBSDF(mi.BSDF):
             channels.append(value)
         return mi.Color3f(channels[0], channels[1], channels[2])
 
-    def _eval(
-        self, si: mi.SurfaceInteraction3f, wo: mi.Vector3f, active: mi.Bool
-    ) -> tuple[mi.Color3f, mi.Bool]:
-        """f · cos θo and the mask of pairs with both directions above the horizon."""
-        cos_i = mi.Frame3f.cos_theta(si.wi)
-        cos_o = mi.Frame3f.cos_theta(wo)
-        active = active & (cos_i > 0.0) & (cos_o > 0.0)
-        value = self._lookup(si.wi, wo, active) * cos_o
-        return dr.select(active, value, 0.0), active
-
-    def eval(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Color3f(0.0)
-        return self._eval(si, wo, mi.Bool(active))[0]
-
-    def pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Float(0.0)
-        active = mi.Bool(active) & (mi.Frame3f.cos_theta(si.wi) > 0.0)
-        active &= mi.Frame3f.cos_theta(wo) > 0.0
-        return dr.select(active, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-
-    def eval_pdf(self, ctx, si, wo, active=True):
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return mi.Color3f(0.0), mi.Float(0.0)
-        value, valid = self._eval(si, wo, mi.Bool(active))
-        pdf = dr.select(valid, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-        return value, pdf
-
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        bs = dr.zeros(mi.BSDFSample3f)
-        if not ctx.is_enabled(mi.BSDFFlags.DiffuseReflection):
-            return bs, mi.Color3f(0.0)
-        wo = mi.warp.square_to_cosine_hemisphere(sample2)
-        value, valid = self._eval(si, wo, mi.Bool(active))
-        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo)
-        valid &= pdf > 0.0
-        bs.wo = wo
-        bs.pdf = dr.select(valid, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-        bs.sampled_component = mi.UInt32(0)
-        weight = dr.select(valid, value / dr.maximum(pdf, 1e-20), 0.0)
-        return bs, weight
+    _eval = CosineSampledTable._eval
+    eval = CosineSampledTable.eval
+    pdf = CosineSampledTable.pdf
+    eval_pdf = CosineSampledTable.eval_pdf
+    sample = CosineSampledTable.sample
 
     def to_string(self) -> str:
         source = self.filename if self.filename is not None else "set via mi.traverse"
