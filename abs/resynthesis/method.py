@@ -182,24 +182,24 @@ def fit_mask(mask: np.ndarray, rgb: np.ndarray | None = None,
     return inner & ~apply_hysteresis_threshold(np.where(inner, lum, 0.0), high / 4.0, high)
 
 
-def _fit_lighting(folder: Path, rgb: np.ndarray, mask: np.ndarray, view: dict,
+def _fit_lighting(folder: Path, rgb: np.ndarray, inner: np.ndarray, view: dict,
                   fitted_env: np.ndarray, seen: np.ndarray, trust: dict,
                   syn: SynthesisSettings) -> np.ndarray:
-    """The unseen light as a smooth map (:mod:`~abs.resynthesis.lighting`), full resolution."""
+    """The unseen light as a smooth map (:mod:`~abs.resynthesis.lighting`), full resolution,
+    fitted on the pixels ``inner`` (:func:`fit_mask`)."""
     from abs.render import Camera, compile_scene
     from abs.render.environment import Environment
     from abs.scene import load_scene
 
     n_theta, n_phi = syn.light_grid
-    inner = fit_mask(mask, rgb, syn.highlight_factor)
     small = 64  # the hats are smooth: their renderings need no finer map
     basis = hat_basis(small, n_theta, n_phi)
-    unseen_small = ~frustum_texels(view["K"], mask.shape, small)
+    unseen_small = ~frustum_texels(view["K"], inner.shape, small)
     path = write_scene_file(folder, "lighting.toml",
                             current_material(trust["reflectance"], trust["roughness"]),
                             syn.light_spp, syn.max_depth)
     compiled = compile_scene(load_scene(path))
-    camera = Camera(view["K"], view["R"], view["t"], mask.shape[1], mask.shape[0])
+    camera = Camera(view["K"], view["R"], view["t"], inner.shape[1], inner.shape[0])
 
     def lit_by(latlong: np.ndarray) -> np.ndarray:
         compiled.environment = Environment(latlong)
@@ -315,18 +315,19 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
     map_height = syn.map_height or int(np.clip(np.ceil(h * 180.0 / syn.fov_deg), 256, 2048))
     environment, seen = environment_with_backdrop(est.environment, est.background, view["K"],
                                                   map_height)
+    compared = fit_mask(mask, rgb, syn.highlight_factor)  # what the fits compare
     with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
         folder = Path(syn.folder) if syn.folder else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
         write_mesh(folder, vertices, faces, view["R"], view["t"])
-        write_capture(folder / "capture", view, rgb, fit_mask(mask, rgb, syn.highlight_factor))
+        write_capture(folder / "capture", view, rgb, compared)
         write_environment(folder, environment)
         trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment),
                              syn.roughness_candidates)
         # The unseen part of the map carries the fitted scale; the backdrop is measured radiance.
         fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
         if min(syn.light_grid) > 0:
-            unseen = _fit_lighting(folder, rgb, mask, view, fitted_env, seen, trust, syn)
+            unseen = _fit_lighting(folder, rgb, compared, view, fitted_env, seen, trust, syn)
             write_environment(folder, np.where(seen[..., None], environment, unseen))
             first = trust
             trust = _fit_current(folder, syn, np.asarray(first["reflectance"]),
@@ -339,8 +340,7 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
     trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
                  relative_residual=trust["residual_rmse"] / max(level, 1e-12),
                  fov_deg=syn.fov_deg,
-                 highlight_pixels_left_out=int(fit_mask(mask).sum()
-                                               - fit_mask(mask, rgb, syn.highlight_factor).sum()))
+                 highlight_pixels_left_out=int(fit_mask(mask).sum() - compared.sum()))
     return FittedScene(view, (h, w), vertices, faces, fitted_env.astype(np.float32), trust)
 
 
