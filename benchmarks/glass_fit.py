@@ -7,9 +7,9 @@ the ``volpath`` integrator, never abs's own path tracer. Sensor noise is added, 
 holdout view. The scene file handed to the fit starts from IOR 1.5 (the last case: 1.75),
 absorption 1/1/1 per metre and environment scale 1; ``abs.fit`` then fits ``glass.absorption``,
 ``glass.ior`` and ``environment.scale`` as the glass recipe does (``fitting/glass_absorption_ior.py``:
-short fits from several IORs choose the start, then ``SETTINGS``, IOR tied), unless
-``--settings`` replaces the settings (then from the scene file's values) or ``--single-start``
-skips the starts.
+short fits from several IORs choose the start, then ``SETTINGS``, IOR tied; the starts are
+``abs.fit``'s own, ``FitSettings.starts``), unless ``--settings`` replaces the settings (then from
+the scene file's values) or ``--single-start`` skips the starts.
 
 Reported per case: fitted values and standard errors against the truth, whether each truth lies
 within two standard errors, holdout RMSE before/after, the fit's own checks, renders and time.
@@ -124,22 +124,15 @@ def run_case(case: Case, work: Path, args) -> dict:
                          read_noise=0.003, seed=1, render=mitsuba_photograph)
         made.write_text(json.dumps({**shape, "truth": _truth(case)}))
     settings = _settings(args.settings)
+    if args.single_start:
+        settings = dataclasses.replace(settings, starts=())
     start = time.perf_counter()
-    initial, starts_s = None, 0.0
-    if json.loads(args.settings) == {} and not args.single_start:
-        # The recipe: short fits from several IORs choose the full fit's start.
-        sys.path.insert(0, str(ROOT / "fitting"))
-        from glass_absorption_ior import best_start
-
-        initial = best_start(folder / "scene.toml", folder / "capture")
-        starts_s = time.perf_counter() - start
 
     def progress(state):
         print(f"  {case.name}: iteration {state.iteration}, RMSE {state.history[-1]['loss']:.4g}, "
               f"{time.perf_counter() - start:.0f} s", flush=True)
 
-    result = fit(folder / "scene.toml", folder / "capture", FITTED, settings, initial=initial,
-                 on_iteration=progress,
+    result = fit(folder / "scene.toml", folder / "capture", FITTED, settings, on_iteration=progress,
                  truth={"glass.absorption": list(case.absorption_per_m), "glass.ior": [case.ior] * 3,
                         "environment.scale": [case.env_scale]})
     summary = result.summary()
@@ -158,8 +151,7 @@ def run_case(case: Case, work: Path, args) -> dict:
     return {"case": case.name, "mesh": case.mesh, "parameters": rows, "checks": summary["checks"],
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
-            "starts_wall_s": starts_s,
-            "start": None if initial is None else {n: np.ravel(v).tolist() for n, v in initial.items()},
+            "starts": summary.get("starts"),
             "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
                       for h in result.history],
             "settings": {**shape, "fit": dataclasses.asdict(settings)}}

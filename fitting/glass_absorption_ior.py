@@ -20,14 +20,12 @@ Why these settings:
   refinement's fresh renders average it out and measure it (the standard errors include it).
 - **The environment's scale with them**: a brighter environment and a clearer glass trade off
   on the glass's pixels; every other pixel pins the scale.
-- **Several starts** (:func:`best_start`): the IOR's objective has more than one basin (a
-  checkerboard seen through a sphere matches itself at more than one magnification: sphere-1.47
-  of the glass suite, started at IOR 1.75, ended at 1.646 ± 0.007 with no check). Short coarse
-  fits from IORs across real glasses (1.45 to 1.75) end in their basins, and the full fit starts
-  from the end point with the lowest two-seed objective averaged over fresh seed pairs at four
-  times the samples: one pair's objective at the coarse stage scatters too much to compare ends
-  (sphere-1.47's four ends: 108, 62, 235, 395 from the short fits' own pair; 1.63, 1.62, 2.74,
-  5.90 averaged, which tells the two ends in the truth's basin from the two in others).
+- **Several starts** (``FitSettings.starts``, :mod:`abs.fitting.starts`): the IOR's objective
+  has more than one basin (a checkerboard seen through a sphere matches itself at more than one
+  magnification: sphere-1.47 of the glass suite, started at IOR 1.75, ended at 1.646 +- 0.007
+  with no check). Short coarse fits from IORs across real glasses (1.45 to 1.75) end in their
+  basins, and the full fit starts from the end with the lowest two-seed objective averaged over
+  fresh seed pairs at four times the samples (``abs fit --starts glass.ior=...`` does the same).
 
 What it assumes: geometry, cameras and the environment's shape are right; the glass's IOR lies
 in 1.4 to 1.8 (``--starts`` otherwise; ``--starts none`` starts at the scene's values, which then
@@ -46,10 +44,7 @@ Usage::
 
 from __future__ import annotations
 
-import numpy as np
-
 import abs
-from abs.model import build_model
 from abs.scene import load_scene
 from common import fit_stage, parser
 
@@ -59,66 +54,19 @@ SETTINGS = dict(spp=64, downsample=2, downsample_schedule=((0, 4), (6, 2)), max_
 #: IORs the short fits start from: real glasses' range (abs.fitting.checks.PLAUSIBLE_RANGES,
 #: 1.45 to 1.8) in steps of 0.1, about the width of a basin at the coarse stage.
 IOR_STARTS = (1.45, 1.55, 1.65, 1.75)
-#: A short fit: the coarse stage of SETTINGS, without refinement.
-START_SETTINGS = dict(spp=64, downsample=4, max_iterations=6, refinement_steps=0)
-#: Scoring the short fits' ends: this many fresh seed pairs at this many times their samples.
-SCORE_PAIRS, SCORE_SPP_FACTOR = 4, 4
 
 
-def settings(material: str = "glass") -> abs.FitSettings:
-    """The recipe's :class:`abs.FitSettings` for the glass material ``material``."""
-    return abs.FitSettings(**SETTINGS, tie=(f"{material}.ior",))
+def settings(material: str = "glass", starts=IOR_STARTS) -> abs.FitSettings:
+    """The recipe's :class:`abs.FitSettings` for the glass material ``material``, with short fits
+    from the IORs ``starts`` first (``None`` or empty: from the scene's values only)."""
+    return abs.FitSettings(**SETTINGS, tie=(f"{material}.ior",),
+                           starts=((f"{material}.ior", tuple(starts)),) if starts else ())
 
 
 def parameters(material: str = "glass", scale: bool = True) -> list[str]:
     """The fitted parameters: absorption, IOR and (unless ``scale`` is false) the environment's
     scale."""
     return [f"{material}.absorption", f"{material}.ior"] + (["environment.scale"] if scale else [])
-
-
-def best_start(scene, capture, material: str = "glass", scale: bool = True,
-               starts=IOR_STARTS) -> dict[str, np.ndarray]:
-    """Starting values for the full fit: a short fit (:data:`START_SETTINGS`) from each IOR in
-    ``starts`` (absorption and scale from the scene), and the end whose two-seed objective,
-    averaged over :data:`SCORE_PAIRS` fresh seed pairs at :data:`SCORE_SPP_FACTOR` times the
-    samples, is lowest (the objective's expectation is the noise-free squared error, so the
-    average compares ends in different basins without the renders' noise favouring any).
-
-    Parameters
-    ----------
-    scene : Scene or path
-    capture : Path
-    material : str
-        The glass material.
-    scale : bool
-        Fit the environment's scale too.
-    starts : sequence of float
-        IORs to start from (one value for all channels).
-
-    Returns
-    -------
-    dict of str to ndarray
-        Parameter name to its value at the chosen start's end (physical units).
-    """
-    names = parameters(material, scale)
-    tie = (f"{material}.ior",)
-    short = abs.FitSettings(**START_SETTINGS, tie=tie)
-    spp = START_SETTINGS["spp"] * SCORE_SPP_FACTOR
-    best = None
-    for ior in starts:
-        result = abs.fit(scene, capture, names, short, initial={f"{material}.ior": [ior] * 3})
-        ended = {n: np.asarray(v, float) for n, v in result.values.items()}
-        model = build_model(scene, capture, names, initial=ended, tied=tie)
-        problem, theta = model.problem(downsample=START_SETTINGS["downsample"]), model.vector.initial
-        # Seeds beyond the short fits' own (which start at 0).
-        pairs = [(problem.residuals(theta, spp, 1000 + 2 * k)[0],
-                  problem.residuals(theta, spp, 1001 + 2 * k)[0]) for k in range(SCORE_PAIRS)]
-        objective = float(np.mean([0.5 * float(a @ b) for a, b in pairs]))
-        print(f"  start IOR {ior:.3f}: ended at {float(ended[f'{material}.ior'][0]):.4f}, mean "
-              f"objective {objective:.6g}", flush=True)
-        if best is None or objective < best[0]:
-            best = (objective, ended)
-    return best[1]
 
 
 def main(argv=None) -> int:
@@ -141,10 +89,7 @@ def main(argv=None) -> int:
             p.error(f"--starts: IORs must lie between 1 and 3, got {args.starts!r}")
     scene = load_scene(args.scene)
     names = parameters(args.material, not args.no_scale)
-    initial = None
-    if starts is not None:
-        initial = best_start(scene, args.capture, args.material, not args.no_scale, starts)
-    fit_stage(scene, args.capture, names, settings(args.material), args.out, initial=initial)
+    fit_stage(scene, args.capture, names, settings(args.material, starts), args.out)
     return 0
 
 

@@ -81,3 +81,39 @@ def test_scan_finds_the_environment_scale(small_scene_dir, capture, tmp_path):
     assert len(summary["channels"][0]["rmse"]) == 7 and (out / "scan.png").stat().st_size > 0
     rmse = np.array(summary["channels"][0]["rmse"])
     assert rmse[0] > rmse.min() < rmse[-1]
+
+
+def test_several_starts_choose_the_fit_start_and_survive_a_resume(small_scene_dir, capture, tmp_path,
+                                                                   capsys):
+    out = tmp_path / "fit"
+    assert _fit(small_scene_dir, capture, out, "--starts", "environment.scale=0.5,1.6",
+                "--max-iterations", "2", "--refinement-steps", "0") == 0
+    summary = json.loads((out / "fit.json").read_text())
+    assert "Several starts" in (out / "report" / "report.html").read_text()
+    printed = capsys.readouterr().out
+    assert "start environment.scale 0.5 -> " in printed and "<- chosen" in printed
+    starts = summary["starts"]
+    assert [t["start"] for t in starts["tried"]] == [{"environment.scale": [0.5]},
+                                                     {"environment.scale": [1.6]}]
+    chosen = starts["tried"][starts["chosen"]]
+    assert chosen["objective"] == min(t["objective"] for t in starts["tried"])
+    # The full fit starts where the chosen short fit ended, and its renders are counted.
+    assert summary["parameters"]["environment.scale"]["initial"] == pytest.approx(
+        chosen["end"]["environment.scale"])
+    assert summary["renders"] > starts["renders"] > 0
+    saved = json.loads((out / "checkpoint.json").read_text())["state"]["start"]
+    assert saved["tried"] == starts["tried"]
+    # A resumed fit keeps its start and does not run the short fits again.
+    assert _fit(small_scene_dir, capture, out, "--starts", "environment.scale=0.5,1.6",
+                "--max-iterations", "4", "--refinement-steps", "0", "--no-report", "--resume") == 0
+    resumed = json.loads((out / "fit.json").read_text())
+    assert resumed["starts"] == starts
+    assert resumed["parameters"]["environment.scale"]["initial"] == pytest.approx(
+        chosen["end"]["environment.scale"])
+
+
+@pytest.mark.parametrize("starts", ["environment.scale", "environment.scale=", "=1,2",
+                                    "environment.scale=1,x", "environment.scale=nan"])
+def test_bad_starts_are_named(small_scene_dir, capture, tmp_path, capsys, starts):
+    assert _fit(small_scene_dir, capture, tmp_path, "--starts", starts) == 2
+    assert "--starts" in capsys.readouterr().err

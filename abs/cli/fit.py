@@ -46,6 +46,10 @@ def add_parser(sub) -> None:
     p.add_argument("--no-reweight", action="store_true",
                    help="render every evaluation, even when all fitted parameters reweight from "
                         "path-length recordings (absorption, environment scale, sensor)")
+    p.add_argument("--starts", action="append", default=[], metavar="NAME=V1,V2,...",
+                   help="several starts: a short fit from each value (every channel), the full fit "
+                        "from the best end; for an IOR before a textured backdrop, e.g. "
+                        "glass.ior=1.45,1.55,1.65,1.75 (repeatable: every combination)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -68,7 +72,8 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from abs.fitting import FitSettings, OptimizerState, fit
-    from abs.fitting.settings import parse_schedule
+    from abs.errors import InputError
+    from abs.fitting.settings import parse_schedule, parse_starts
     from abs.report.text import summary_lines
     from abs.runs.files import load_checkpoint, save_checkpoint
     from abs.runs.fit_folder import FIT_FILE, write_fit_folder
@@ -76,12 +81,16 @@ def run(args) -> int:
     from abs.simulate import read_truth
     from abs.scene import load_scene
 
+    try:
+        starts = parse_starts(args.starts)
+    except ValueError as exc:
+        raise InputError(None, "--starts", str(exc)) from None
     settings = FitSettings(
         method=args.method, spp=args.spp, downsample=args.downsample, clamp=args.clamp,
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
-        seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight)
+        seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

@@ -24,6 +24,7 @@ from abs.fitting.optimisers import OptimizerState, get
 from abs.fitting.optimisers.lm import pair_seeds
 from abs.fitting.scan import channel_curves, default_grid, parabola_minimum
 from abs.fitting.settings import FitSettings
+from abs.fitting.starts import StartChoice, choose_start
 from abs.metrics import ssim
 from abs.model import ParameterVector, build_model, estimate_image_noise, render_views
 
@@ -63,6 +64,7 @@ class FitResult:
     checks: list[str] = field(default_factory=list)
     scan: dict | None = None
     limited: dict[str, np.ndarray] | None = None
+    starts: StartChoice | None = None
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -95,6 +97,7 @@ class FitResult:
             "image_noise": self.image_noise,
             "checks": list(self.checks),
             **({"scan": self.scan} if self.scan else {}),
+            **({"starts": self.starts.to_dict()} if self.starts is not None else {}),
         }
 
 
@@ -151,8 +154,11 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         Parameter names (``glass.absorption``, ``environment.scale``, ``sphere.pose``...);
         default: the scene's ``[fit] parameters``.
     settings : FitSettings
+        With ``starts``, short fits from several values choose the start first
+        (:mod:`abs.fitting.starts`; recorded in the summary's ``starts``).
     initial : dict, optional
-        Starting values by parameter name, instead of the scene file's.
+        Starting values by parameter name, instead of the scene file's (several starts begin
+        from these too, but for the parameters they set).
     resume : OptimizerState, optional
         Continue an interrupted fit (from its checkpoint).
     on_iteration : callable, optional
@@ -165,6 +171,13 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
+    starts = None
+    if resume is not None and resume.start is not None:
+        starts = StartChoice.from_dict(resume.start)
+    elif settings.starts and resume is None:
+        starts = choose_start(scene, capture, parameters, settings, initial)
+    if starts is not None:
+        initial = {**(initial or {}), **starts.values}
     model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight)
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
@@ -188,7 +201,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     objective = Objective.build(model, settings, sigma, priors)
     has_prior, prior_sd = objective.has_prior, objective.prior_sd
 
-    state = resume or OptimizerState(method, 0, vector.to_unconstrained(vector.initial))
+    state = resume or OptimizerState(method, 0, vector.to_unconstrained(vector.initial),
+                                     start=None if starts is None else starts.to_dict())
     previous_wall = float(state.history[-1].get("wall_s", 0.0)) if state.history else 0.0
 
     def iteration_done(s: OptimizerState) -> None:
@@ -238,10 +252,15 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
              for o in full.observations]
     history = [{**h, "values": {k: v.tolist() for k, v in vector.split(vector.to_physical(h["z"])).items()}}
                for h in state.history]
+    # The starts' short fits count in renders and time (a resumed fit counts only what it
+    # rendered itself, as for the optimiser's renders).
+    renders, samples = counter.renders, counter.samples
+    if starts is not None and resume is None:
+        renders, samples = renders + starts.renders, samples + starts.samples_rendered
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
-                       metrics, method, state.iteration, counter.renders, counter.samples,
+                       metrics, method, state.iteration, renders, samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
-                       scan=scans, limited=limited)
+                       scan=scans, limited=limited, starts=starts)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)

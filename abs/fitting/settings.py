@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["FitSettings", "schedule_value", "parse_schedule"]
+import numpy as np
+
+__all__ = ["FitSettings", "schedule_value", "parse_schedule", "parse_starts"]
 
 # Levenberg-Marquardt's Jacobian costs one forward-mode pass per scalar; beyond this many scalars
 # Adam on reverse-mode gradients is cheaper.
@@ -74,6 +76,12 @@ class FitSettings:
         Per-channel parameters fitted as one value for all channels (``("glass.ior",)``: an IOR
         whose dispersion the photographs do not resolve; three noisy channels would each be
         barely constrained).
+    starts : tuple of (str, tuple of float)
+        Several starts (:mod:`abs.fitting.starts`): ``(("glass.ior", (1.45, 1.55, 1.65, 1.75)),)``
+        runs a short fit from each value (set for every channel; several parameters: every
+        combination), and the full fit starts where the best one ended. For an objective with
+        more than one basin (an IOR seen through a sphere before a checkerboard). Empty: one
+        start.
     """
 
     method: str = "auto"
@@ -91,6 +99,7 @@ class FitSettings:
     seed: int = 0
     tie: tuple[str, ...] = ()
     reweight: bool = True
+    starts: tuple[tuple[str, tuple[float, ...]], ...] = ()
 
     def __post_init__(self):
         from abs.fitting.optimisers import names
@@ -101,8 +110,28 @@ class FitSettings:
                              f"not {self.method!r}")
         if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1:
             raise ValueError("spp, downsample and max_iterations must be >= 1")
+        for entry in self.starts:
+            if (len(entry) != 2 or not isinstance(entry[0], str) or not len(entry[1])
+                    or not all(np.isfinite(float(v)) for v in entry[1])):
+                raise ValueError(f"starts: expected (parameter name, (value, ...)), got {entry!r}")
 
     def resolved_method(self, n_scalars: int) -> str:
         if self.method != "auto":
             return self.method
         return "lm" if n_scalars <= LM_MAX_SCALARS else "adam"
+
+
+def parse_starts(items) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """``["glass.ior=1.45,1.55"]`` -> ``(("glass.ior", (1.45, 1.55)),)`` (the command line's
+    ``--starts``)."""
+    out = []
+    for item in items:
+        name, _, values = item.partition("=")
+        try:
+            numbers = tuple(float(v) for v in values.split(","))
+        except ValueError:
+            numbers = ()
+        if not name.strip() or not numbers or not all(np.isfinite(numbers)):
+            raise ValueError(f"--starts {item!r}: expected NAME=V1,V2,... (numbers)")
+        out.append((name.strip(), numbers))
+    return tuple(out)

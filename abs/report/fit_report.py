@@ -54,6 +54,8 @@ def write_fit_report(folder: str | Path, summary: Mapping, views: Sequence[Repor
     sections = ([html.section("Checks", *(f"<p>{escape(c)}</p>" for c in checks))] if checks else [])
     sections += [html.section("Metrics", html.metrics_table(summary)),
                  html.section("Parameters", html.parameter_table(parameters))]
+    if summary.get("starts"):
+        sections.append(html.section("Several starts", html.starts_table(summary["starts"])))
 
     convergence = []
     iterations, loss = loss_curve(history)

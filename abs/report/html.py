@@ -126,6 +126,19 @@ def parameter_table(parameters: Mapping[str, Mapping]) -> str:
     return html_table(header, rows)
 
 
+def starts_table(starts: Mapping) -> str:
+    """One row per short fit of several starts (``fit.json``'s ``starts``): where it started,
+    where it ended (first component of each parameter), its mean two-seed objective, and which
+    one the fit started from."""
+    rows = []
+    for k, tried in enumerate(starts["tried"]):
+        rows.append([", ".join(f"{escape(n)} {format_number(v[0])}" for n, v in tried["start"].items()),
+                     ", ".join(f"{escape(n)} {format_number(as_vector(v)[0])}"
+                               for n, v in tried["end"].items()),
+                     format_number(tried["objective"]), "chosen" if k == starts["chosen"] else ""])
+    return html_table(["start", "end", "objective (mean of fresh seed pairs)", ""], rows)
+
+
 def figure(src: str, caption: str) -> str:
     """An image file (relative name) with a caption, which is also its alternative text."""
     text = escape(caption)

@@ -4,12 +4,22 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+import numpy as np
+
 __all__ = ["summary_lines"]
 
 
 def summary_lines(summary: Mapping) -> list[str]:
-    """``name = [value ± stderr, ...] unit`` per parameter, then RMSE before -> after."""
+    """Where several starts went (when there were any), ``name = [value ± stderr, ...] unit`` per
+    parameter, then RMSE before -> after."""
     lines = []
+    starts = summary.get("starts")
+    if starts:
+        for k, tried in enumerate(starts["tried"]):
+            start = ", ".join(f"{n} {v[0]:.4g}" for n, v in tried["start"].items())
+            end = ", ".join(f"{np.ravel(tried['end'][n])[0]:.4g}" for n in tried["start"])
+            chosen = "  <- chosen" if k == starts["chosen"] else ""
+            lines.append(f"start {start} -> {end} (objective {tried['objective']:.4g}){chosen}")
     for name, entry in summary["parameters"].items():
         values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g} (unconstrained)"
                            for v, s in zip(entry["value"], entry["stderr"]))

@@ -49,6 +49,9 @@ class OptimizerState:
     solver : object or None
         The optimiser's own typed state (its :attr:`Optimiser.State`); ``None`` before its first
         iteration.
+    start : dict or None
+        Where several starts sent the fit (:meth:`abs.fitting.starts.StartChoice.to_dict`), so
+        that a resumed fit neither runs them again nor forgets where it started.
     """
 
     method: str
@@ -56,13 +59,15 @@ class OptimizerState:
     z: np.ndarray
     history: list[dict] = field(default_factory=list)
     solver: Any = None
+    start: dict | None = None
 
     def to_dict(self) -> dict:
         # The optimiser's state is saved under "moments", the key checkpoints have always used,
         # so that checkpoints written before the optimisers became objects still resume.
         return {"method": self.method, "iteration": self.iteration, "z": list(map(float, self.z)),
                 "history": self.history,
-                "moments": {} if self.solver is None else self.solver.to_dict()}
+                "moments": {} if self.solver is None else self.solver.to_dict(),
+                **({"start": self.start} if self.start is not None else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "OptimizerState":
@@ -70,7 +75,7 @@ class OptimizerState:
         moments = dict(d.get("moments", {}))
         solver = get(method).State.from_dict(moments) if moments else None
         return cls(method, int(d["iteration"]), np.asarray(d["z"], np.float64),
-                   list(d.get("history", [])), solver)
+                   list(d.get("history", [])), solver, d.get("start"))
 
 
 Callback = Callable[[OptimizerState], None]
