@@ -134,11 +134,12 @@ pose = [0.07, 0.0, -0.05, 0.0, 0.0, 0.0]
     problem.render(obs, moved, 64, 3)
     assert recorded.counter.renders > renders
     # The same columns from renders only: the second glass's are the same render (the same
-    # samples, bit for bit up to float sums); the recorded ones (made at absorption 0, whose
-    # roulette decisions differ) agree within the noise (about 10 % summed over pixels here).
+    # samples, bit for bit up to float sums); the recorded ones (made at absorption 0, with the
+    # same roulette decisions) agree to the length binning's error (0.3 %; 10 % when roulette
+    # followed the absorption).
     plain = build_model(tmp_path / "scene.toml", tmp_path / "capture", reweight=False)
     _, jac_p = plain.problem()._render_with_jacobian(plain.problem().observations[0], theta, 64, 3)
     for i in range(jac.shape[-1]):
         scale = np.abs(jac_p[..., i]).sum()
         difference = np.abs(jac[..., i] - jac_p[..., i]).sum() / scale
-        assert scale > 0 and difference < (1e-5 if 3 <= i < 6 else 0.2), (i, difference)
+        assert scale > 0 and difference < (1e-5 if 3 <= i < 6 else 1e-2), (i, difference)

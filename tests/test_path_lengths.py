@@ -1,9 +1,9 @@
 """Path-length recordings: one render gives the image at every absorption and environment scale.
 
-Without Russian roulette a render's paths do not depend on the absorption at all (it only scales
-what they carry), so a render at absorption ``sigma`` and a recording reweighted to ``sigma``,
-both with the same seed, must agree up to the binning's interpolation error. With roulette (as
-fits render) the samples differ and the two agree within Monte-Carlo noise.
+A render's paths do not depend on the absorption at all (it only scales what they carry, and
+Russian roulette's decisions follow a throughput without the glass's weights), so a render at
+absorption ``sigma`` and a recording reweighted to ``sigma``, both with the same seed, must agree
+up to the binning's interpolation error, with roulette or without.
 """
 
 from __future__ import annotations
@@ -36,10 +36,15 @@ def _glass(compiled):
 
 
 @pytest.mark.parametrize("factor", [0.0, 1.0, 5.0, 10.0])
-def test_reweighting_equals_a_render_without_roulette(scene, factor):
+@pytest.mark.parametrize("rr_depth", [8, 2])
+def test_reweighting_equals_a_render(scene, factor, rr_depth):
+    """Sample by sample, without roulette (``rr_depth`` 8 = the path length) and with roulette from
+    the second vertex on: its decisions must not depend on the absorption (with the glass's
+    absorption in roulette's throughput, the sampling benchmark's render and reweighted recording
+    differed by 3e-3 RMS, a tenth of the residual)."""
     compiled, camera = scene
     before = compiled.get("glass.absorption")
-    tracer = PathTracer(max_depth=8, rr_depth=8)  # no roulette: the same paths at every sigma
+    tracer = PathTracer(max_depth=8, rr_depth=rr_depth)
     bins = length_bins(0.173)  # the 10 cm sphere's bounding-box diagonal
     try:
         compiled.set("glass.absorption", RECORDED)
@@ -62,8 +67,8 @@ def test_reweighting_equals_a_render_without_roulette(scene, factor):
 
 
 def test_reweighting_with_roulette_is_unbiased(scene):
-    """Fits render with Russian roulette, whose decisions depend on the absorption: reweighted
-    and direct renders then differ sample by sample but agree in expectation."""
+    """Reweighted and direct renders with other seeds agree in expectation (the reweighting
+    is unbiased, not just equal to one render)."""
     compiled, camera = scene
     before = compiled.get("glass.absorption")
     recording = compiled.record(camera, spp=64, seed=1)  # at absorption 0

@@ -3,8 +3,8 @@
 Beer-Lambert absorption only reweights light paths. A path that travels a total length ``L``
 inside a glass of absorption ``sigma_c`` (1/m, colour channel ``c``) carries ``exp(-sigma_c L)``,
 and nothing else in how it was sampled depends on ``sigma``: next-event estimation and MIS use
-pdfs without it, and Russian roulette's survival probability is a sampling decision, so keeping
-the decisions keeps the estimator unbiased at any ``sigma``. With the same random numbers a
+pdfs without it, and Russian roulette's survival probability follows the throughput without the
+glass's vertices (:mod:`abs.render.integrator`), so its decisions are the same at any ``sigma``. With the same random numbers a
 pixel's estimate is therefore exactly
 
     I_c(sigma) = sum_paths f_c exp(-(sigma_c - sigma_rec,c) L),
