@@ -90,10 +90,10 @@ def test_free_refit_renders_nothing_and_minimises_over_the_reweightable_paramete
     assert absorption[0] > absorption[1] > absorption[2], absorption
 
 
-def test_two_glasses_record_one_and_render_the_other(tmp_path):
-    """With two glass materials' absorptions fitted, recordings keep the first glass's lengths:
-    its absorption and the scale stay free of renders, the second glass's absorption renders
-    (as an IOR would), and the Jacobian columns agree with a fit that renders everything."""
+def test_two_glasses_are_recorded_jointly(tmp_path):
+    """With two glass materials' absorptions fitted, recordings keep both glasses' lengths (one
+    joint histogram): both absorptions and the scale are free of renders, and the Jacobian
+    columns agree with a fit that renders everything."""
     make_sphere_and_floor(tmp_path)
     make_backdrop(tmp_path)
     make_env(tmp_path / "env.exr")
@@ -117,29 +117,25 @@ pose = [0.07, 0.0, -0.05, 0.0, 0.0, 0.0]
                      width=24, height=18, spp=16, seed=2)
     recorded = build_model(tmp_path / "scene.toml", tmp_path / "capture")
     problem = recorded.problem()
-    assert problem.recorded_material == "glass"
-    assert problem.reweightable == ["glass.absorption", "environment.scale"]
-    assert not problem.uses_recordings
+    assert problem.recorded_materials == ("glass", "tint")
+    assert problem.reweightable == ["glass.absorption", "tint.absorption", "environment.scale"]
+    assert problem.uses_recordings
     theta = recorded.vector.initial
     obs = problem.observations[0]
     image, jac = problem._render_with_jacobian(obs, theta, 64, 3)
     renders = recorded.counter.renders
-    # Another absorption of the recorded glass: the same recording, no render.
+    # Other absorptions of either glass: the same recording, no render.
     moved = theta.copy()
     moved[:3] *= 1.5
-    problem.render(obs, moved, 64, 3)
-    assert recorded.counter.renders == renders
-    # Another absorption of the second glass changes the paths' weights: a render.
     moved[3:6] *= 1.5
     problem.render(obs, moved, 64, 3)
-    assert recorded.counter.renders > renders
-    # The same columns from renders only: the second glass's are the same render (the same
-    # samples, bit for bit up to float sums); the recorded ones (made at absorption 0, with the
-    # same roulette decisions) agree to the length binning's error (0.3 %; 10 % when roulette
-    # followed the absorption).
+    assert recorded.counter.renders == renders
+    # The same columns from renders only (forward mode): the recorded ones (made at absorption
+    # 0, with the same roulette decisions) agree to the joint length binning's error (nodes
+    # 30 mm apart: at most 1.1 % for the tint's 10 per metre).
     plain = build_model(tmp_path / "scene.toml", tmp_path / "capture", reweight=False)
     _, jac_p = plain.problem()._render_with_jacobian(plain.problem().observations[0], theta, 64, 3)
     for i in range(jac.shape[-1]):
         scale = np.abs(jac_p[..., i]).sum()
         difference = np.abs(jac[..., i] - jac_p[..., i]).sum() / scale
-        assert scale > 0 and difference < (1e-5 if 3 <= i < 6 else 1e-2), (i, difference)
+        assert scale > 0 and difference < 2e-2, (i, difference)

@@ -45,6 +45,7 @@ from abs.model.counter import RenderCounter
 from abs.model.observations import Observation
 from abs.model.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
+from abs.render.path_lengths import MAX_MATERIALS
 
 __all__ = ["FitProblem", "render_views"]
 
@@ -103,23 +104,23 @@ class FitProblem:
                        if self.compiled.specs[n].reweighting == "absorption"})
 
     @property
-    def recorded_material(self) -> str | None:
-        """The glass whose path lengths recordings keep: the owner of the fitted absorption, the
-        first by name when several glasses' absorptions are fitted (the others then change the
-        paths' weights in ways one length cannot reweight, and are rendered like an IOR); ``None``
-        when no absorption is fitted."""
-        owners = self._absorption_owners()
-        return owners[0] if owners else None
+    def recorded_materials(self) -> tuple[str, ...]:
+        """The glasses whose path lengths recordings keep: the owners of the fitted absorptions,
+        one length each (a joint histogram, :mod:`abs.render.path_lengths`), the first
+        ``MAX_MATERIALS`` by name when more are fitted (the others then change the paths' weights
+        in ways the recorded lengths cannot reweight, and are rendered like an IOR); empty when
+        no absorption is fitted."""
+        return tuple(self._absorption_owners()[:MAX_MATERIALS])
 
     @property
     def reweightable(self) -> list[str]:
         """The fitted parameters whose values a path-length recording gives without a render (the
-        absorption of :attr:`recorded_material`, the environment's scale, a sensor parameter), in
+        absorptions of :attr:`recorded_materials`, the environment's scale, a sensor parameter), in
         the vector's order; empty when recordings are off. Renders are recordings whenever this
         is not empty."""
         if not self.reweight:
             return []
-        others = set(self.compiled.needs_render(self.vector.names, self.recorded_material))
+        others = set(self.compiled.needs_render(self.vector.names, self.recorded_materials))
         return [n for n in self.vector.names if n not in others]
 
     @property
@@ -133,10 +134,10 @@ class FitProblem:
     def _fingerprint(self) -> str:
         """A digest of every compiled value a recording depends on (those it cannot reweight),
         so that a recording is never reused after something else changed the scene."""
-        material = self.recorded_material
+        materials = self.recorded_materials
         digest = hashlib.sha1()
         for name in sorted(self.compiled.values):
-            if self.compiled.needs_render([name], material):
+            if self.compiled.needs_render([name], materials):
                 digest.update(name.encode())
                 digest.update(self.compiled.get(name).tobytes())
         return digest.hexdigest()
@@ -147,8 +148,8 @@ class FitProblem:
         if key in self._recordings:
             self._recordings.move_to_end(key)
             return self._recordings[key]
-        material = self.recorded_material
-        recording = self.compiled.record(observation.camera, spp, seed, material=material,
+        recording = self.compiled.record(observation.camera, spp, seed,
+                                         materials=self.recorded_materials,
                                          max_depth=self.max_depth)
         self.counter.add(observation.camera, spp)
         self._recordings[key] = recording

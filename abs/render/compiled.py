@@ -30,7 +30,8 @@ from abs.render.edges import MovingMesh, edge_adjacency, neighbour_mean
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
 from abs.render.jit import from_numpy, opaque
-from abs.render.path_lengths import LengthBins, PathLengthRecording, length_bins, reweight
+from abs.render.path_lengths import (DEFAULT_NODES, JOINT_NODES, MAX_MATERIALS,
+                                     PathLengthRecording, length_bins, reweight)
 from abs.render.rotation import rotation_matrix
 from abs.render.sensor import Sensor
 from abs.scene.scene import Scene
@@ -582,23 +583,25 @@ class CompiledScene:
         return glass[0] if glass else None
 
     def record(self, camera: Camera, spp: int | None = None, seed: int = 0,
-               material: str | None = "auto", bins: LengthBins | None = None,
-               absorption_per_m=0.0, max_depth: int | None = None) -> PathLengthRecording:
-        """Render ``camera``'s view recording its light by path length inside ``material``.
+               materials="auto", bins=None, absorption_per_m=0.0,
+               max_depth: int | None = None) -> PathLengthRecording:
+        """Render ``camera``'s view recording its light by path length inside ``materials``.
 
         :func:`~abs.render.path_lengths.reweight` (:meth:`render_recorded`) then gives the view
-        at any absorption of that material and any environment scale and sensor, with no further
-        render (see :mod:`abs.render.path_lengths`).
+        at any absorptions of those materials and any environment scale and sensor, with no
+        further render (see :mod:`abs.render.path_lengths`).
 
         Parameters
         ----------
-        material : str or None
-            The glass material (``"auto"``: :meth:`glass_material`; ``None``: no lengths, only
-            scale and sensor reweight).
-        bins : LengthBins, optional
-            Default: 32 nodes up to 4 diagonals of the bounding box of the material's objects.
-        absorption_per_m : float or array-like of 3
-            The absorption (1/m) to record at; 0 (the default) makes every reweighting an
+        materials : str, sequence of str, or ``"auto"``
+            The glass materials, at most :data:`~abs.render.path_lengths.MAX_MATERIALS`
+            (``"auto"``: :meth:`glass_material`; empty or ``None``: no lengths, only scale and
+            sensor reweight).
+        bins : sequence of LengthBins, optional
+            One per material. Default: up to 4 diagonals of the bounding box of the material's
+            objects, 32 nodes for one material, ``JOINT_NODES`` each for several.
+        absorption_per_m : float, array-like of 3, or one row of 3 per material
+            The absorptions (1/m) to record at; 0 (the default) makes every reweighting an
             attenuation, whose variance is at most the recording's.
 
         Returns
@@ -606,51 +609,62 @@ class CompiledScene:
         PathLengthRecording
         """
         spp = spp or self.scene.render.spp
-        material = self.glass_material() if material == "auto" else material
-        glass = None
-        if material is not None:
+        if materials == "auto":
+            materials = self.glass_material()
+        materials = (() if materials is None else (materials,) if isinstance(materials, str)
+                     else tuple(materials))
+        if len(materials) > MAX_MATERIALS or len(set(materials)) != len(materials):
+            raise ValueError(f"record at most {MAX_MATERIALS} distinct glass materials, not "
+                             f"{', '.join(materials)}")
+        nodes = DEFAULT_NODES if len(materials) == 1 else JOINT_NODES
+        glasses, default_bins = [], []
+        for material in materials:
             if "absorption" not in self.scene.materials[material].parameters():
                 raise ValueError(f"material {material!r} has no absorption to record lengths for")
             shapes = [s for s in self.mitsuba_scene.shapes() if s.bsdf().id() == material]
             if not shapes:
                 raise ValueError(f"no object of the scene is made of {material!r}")
-            glass = shapes[0].bsdf()
-            if bins is None:
-                box = mi.ScalarBoundingBox3f()
-                for shape in shapes:
-                    box.expand(shape.bbox())
-                bins = length_bins(float(dr.norm(box.extents())))
-        bins = bins or LengthBins(2, 1.0)
-        recorded = np.broadcast_to(np.asarray(absorption_per_m, np.float64), 3).copy()
-        name = f"{material}.absorption"
-        before = self.get(name) if material is not None else None
+            glasses.append(shapes[0].bsdf())
+            box = mi.ScalarBoundingBox3f()
+            for shape in shapes:
+                box.expand(shape.bbox())
+            default_bins.append(length_bins(float(dr.norm(box.extents())), nodes))
+        bins = tuple(default_bins if bins is None else bins)
+        if len(bins) != len(materials):
+            raise ValueError(f"{len(bins)} length bins for {len(materials)} materials")
+        value = np.asarray(absorption_per_m, np.float64)
+        recorded = np.broadcast_to(value if value.ndim == 2 else np.broadcast_to(value, 3),
+                                   (len(materials), 3)).copy()
+        names = [f"{m}.absorption" for m in materials]
+        before = [self.get(n) for n in names]
         tracer = self._tracer(max_depth)
         batches = self._batches(camera, spp, samples_in_flight())
         histogram = None
         try:
-            if material is not None:
-                self.set(name, recorded)
+            for name, value in zip(names, recorded):
+                self.set(name, value)
             with dr.suspend_grad():
                 for i, n in enumerate(batches):
                     part = tracer.record(self.mitsuba_scene, self.environment, camera, n,
-                                         seed * 7919 + i if len(batches) > 1 else seed, glass, bins)
+                                         seed * 7919 + i if len(batches) > 1 else seed, glasses,
+                                         bins)
                     part = part * opaque(mi.Float, n / spp)
                     histogram = part if histogram is None else histogram + part
                     dr.eval(histogram)
                 env_scale = float(dr.detach(self.environment.scale)[0])
         finally:
-            if material is not None:
-                self.set(name, before)
-        histogram = histogram.numpy().reshape(camera.height, camera.width, 3, bins.slots)
-        return PathLengthRecording(histogram, bins, material, recorded, env_scale, spp, seed)
+            for name, value in zip(names, before):
+                self.set(name, value)
+        histogram = histogram.numpy().reshape(camera.height, camera.width, 3, -1)
+        return PathLengthRecording(histogram, bins, materials, recorded, env_scale, spp, seed)
 
-    def needs_render(self, names, material: str | None) -> list[str]:
+    def needs_render(self, names, materials) -> list[str]:
         """Those of ``names`` whose new values need a new render: the parameters a recording of
-        ``material``'s path lengths does not reweight (empty: it gives every one)."""
+        ``materials``' path lengths does not reweight (empty: it gives every one)."""
         out = []
         for name in names:
             how = self._spec(name).reweighting
-            if how is None or (how == "absorption" and self._spec(name).owner != material):
+            if how is None or (how == "absorption" and self._spec(name).owner not in materials):
                 out.append(name)
         return out
 
@@ -667,8 +681,7 @@ class CompiledScene:
         if (camera.width, camera.height) != (recording.width, recording.height):
             raise ValueError(f"the recording is {recording.width}x{recording.height}, the camera "
                              f"{camera.width}x{camera.height}")
-        absorption = (recording.absorption_per_m if recording.material is None
-                      else self.get(f"{recording.material}.absorption"))
+        absorption = np.array([self.get(f"{m}.absorption") for m in recording.materials]).reshape(-1, 3)
         return absorption, float(self.get("environment.scale")[0])
 
     def render_recorded_forward(self, recording: PathLengthRecording, camera: Camera,
@@ -676,13 +689,13 @@ class CompiledScene:
         """:meth:`render_forward` from a recording: the view and its derivative along
         ``tangents``, which may name only parameters the recording reweights (the absorption in
         closed form, the scale, the sensor by forward mode through it)."""
-        others = self.needs_render(tangents, recording.material)
+        others = self.needs_render(tangents, recording.materials)
         if others:
             raise ValueError(f"{', '.join(others)} change the light paths (or are not recorded): "
                              "a recording cannot differentiate them")
-        zero = np.zeros(3)
-        d_absorption = (np.asarray(tangents.get(f"{recording.material}.absorption", zero), np.float64)
-                        if recording.material is not None else zero)
+        d_absorption = np.array([np.broadcast_to(np.asarray(tangents.get(f"{m}.absorption", 0.0),
+                                                            np.float64), 3)
+                                 for m in recording.materials]).reshape(-1, 3)
         d_scale = float(np.asarray(tangents.get("environment.scale", 0.0)).ravel()[0])
         radiance, derivative = reweight(recording, *self._recorded_values(recording, camera),
                                         d_absorption=d_absorption, d_scale=d_scale)

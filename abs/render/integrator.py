@@ -75,7 +75,7 @@ from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
 from abs.render.jit import opaque, seed32
-from abs.render.path_lengths import LengthBins, bin_light
+from abs.render.path_lengths import bin_light
 
 __all__ = ["PathTracer", "MODES"]
 
@@ -274,43 +274,46 @@ class PathTracer:
         dr.while_loop(state, cond, body, max_iterations=self.max_depth, label="abs path replay")
 
     def record(self, scene: mi.Scene, env: Environment, camera: Camera, spp: int, seed: int,
-               glass: mi.BSDF | None, bins: LengthBins, dispersion: str = "auto") -> mi.Float:
-        """Render one view recording its light by in-glass path length (a primal render).
+               glasses, bins, dispersion: str = "auto") -> mi.Float:
+        """Render one view recording its light by in-glass path lengths (a primal render).
 
-        Every vertex's light is binned at the total length its path has travelled inside
-        ``glass`` so far (:func:`~abs.render.path_lengths.bin_light`); the image at another
-        absorption of that glass then follows without rendering
-        (:func:`~abs.render.path_lengths.reweight`). The samples are those of :meth:`render`
-        with the same ``seed``: at the recording's own absorption the reweighted image is that
-        render's, up to float rounding.
+        Every vertex's light is binned at the total lengths its path has travelled inside each
+        of ``glasses`` (BSDFs, one :class:`~abs.render.path_lengths.LengthBins` each in ``bins``)
+        so far (:func:`~abs.render.path_lengths.bin_light`); the image at other absorptions of
+        those glasses then follows without rendering (:func:`~abs.render.path_lengths.reweight`).
+        The samples are those of :meth:`render` with the same ``seed``: at the recording's own
+        absorptions the reweighted image is that render's, up to float rounding.
 
         Returns
         -------
         mi.Float
-            ``height * width * 3 * bins.slots`` floats: the histogram of
+            ``height * width * 3 * prod(b.slots)`` floats: the histogram of
             :class:`~abs.render.path_lengths.PathLengthRecording` (divided by ``spp``).
         """
         split = self._split(scene, dispersion)
-        histogram = dr.zeros(mi.Float, camera.width * camera.height * 3 * bins.slots)
-        target = None if glass is None else opaque(mi.UInt32, dr.reinterpret_array(
-            mi.UInt32, mi.BSDFPtr(glass))[0])
+        slots = 1
+        for b in bins:
+            slots *= b.slots
+        histogram = dr.zeros(mi.Float, camera.width * camera.height * 3 * slots)
+        targets = tuple(opaque(mi.UInt32, dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(g))[0])
+                        for g in glasses)
         with dr.suspend_grad():
             sampler, ray, pixel = self._camera_rays(camera, spp, seed)
             state = (sampler, ray, mi.Color3f(1.0), mi.Bool(True), mi.Float(1.0), mi.Bool(True),
-                     mi.UInt32(0), mi.Float(0.0), mi.Color3f(1.0))
+                     mi.UInt32(0), tuple(mi.Float(0.0) for _ in targets), mi.Color3f(1.0))
 
             def cond(sampler, ray, beta, active, *rest):
                 return active
 
-            def body(sampler, ray, beta, active, prev_pdf, prev_delta, depth, length, roulette):
-                light, ray, beta, active, prev_pdf, prev_delta, glass_length, roulette = self._step(
+            def body(sampler, ray, beta, active, prev_pdf, prev_delta, depth, lengths, roulette):
+                light, ray, beta, active, prev_pdf, prev_delta, glass_lengths, roulette = self._step(
                     scene, env, sampler, ray, beta, active, prev_pdf, prev_delta, depth, split,
-                    glass_id=target, roulette=roulette)
-                # This vertex's light has been attenuated along ``length``; the segment that
-                # ended here (if in the glass) attenuates the light of the vertices after it.
-                bin_light(histogram, pixel, light, length, bins)
+                    glass_ids=targets, roulette=roulette)
+                # This vertex's light has been attenuated along ``lengths``; the segment that
+                # ended here (if in a glass) attenuates the light of the vertices after it.
+                bin_light(histogram, pixel, light, lengths, bins)
                 return (sampler, ray, beta, active, prev_pdf, prev_delta, depth + 1,
-                        length + glass_length, roulette)
+                        tuple(a + b for a, b in zip(lengths, glass_lengths)), roulette)
 
             dr.while_loop(state, cond, body, max_iterations=self.max_depth,
                           label="abs path tracer (recording)")
@@ -396,13 +399,13 @@ class PathTracer:
         return mi.TensorXf(flat, (h, w, 3))
 
     def _step(self, scene, env: Environment, sampler, ray, beta, active, prev_pdf, prev_delta,
-              depth, split, glass_id=None, roulette=None):
+              depth, split, glass_ids=(), roulette=None):
         """One path vertex: light reaching the camera from it, and the continued path.
 
-        Returns ``(light, ray, beta, active, prev_pdf, prev_delta, glass_length, roulette)``:
-        ``glass_length`` is the length (m) of the segment that ended here if it ran inside the
-        BSDF whose registry id is ``glass_id`` (a ``UInt32``; the segment whose Beer-Lambert factor this vertex's sample
-        weight applies), else 0; always 0 without ``glass_id``. ``roulette`` (detached
+        Returns ``(light, ray, beta, active, prev_pdf, prev_delta, glass_lengths, roulette)``:
+        ``glass_lengths`` holds, per BSDF registry id in ``glass_ids`` (``UInt32``), the length
+        (m) of the segment that ended here if it ran inside that BSDF (the segment whose
+        Beer-Lambert factor this vertex's sample weight applies), else 0. ``roulette`` (detached
         ``Color3f``, 1 at the camera) is the throughput that Russian roulette's survival
         probability follows: ``beta`` without the sample weights of specular vertices, so that
         no glass's absorption or IOR changes a decision (module docstring).
@@ -430,12 +433,12 @@ class PathTracer:
             keep = mi.Color3f(*[dr.select(channel == c, 3.0, 0.0) for c in range(3)])
             beta = dr.select(glass, beta * keep, beta)
         si.time = mi.Float(channel)
-        glass_length = mi.Float(0.0)
-        if glass_id is not None:
+        glass_lengths = ()
+        if glass_ids:
             # Compared as registry ids: pointer comparison fails inside symbolic loops.
-            inside = active & (dr.reinterpret_array(mi.UInt32, bsdf) == glass_id) & \
-                (mi.Frame3f.cos_theta(si.wi) < 0.0)
-            glass_length = dr.select(inside, si.t, 0.0)
+            inside = active & (mi.Frame3f.cos_theta(si.wi) < 0.0)
+            bsdf_id = dr.reinterpret_array(mi.UInt32, bsdf)
+            glass_lengths = tuple(dr.select(inside & (bsdf_id == g), si.t, 0.0) for g in glass_ids)
 
         # Next-event estimation towards the environment (smooth lobes only).
         smooth = active & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -462,7 +465,7 @@ class PathTracer:
         beta = dr.select(played, dr.select(survive, beta / q, 0.0), beta)
         roulette = dr.select(played & survive, roulette / q, roulette)
         active &= ~played | survive
-        return light, ray, beta, active, prev_pdf, prev_delta, glass_length, roulette
+        return light, ray, beta, active, prev_pdf, prev_delta, glass_lengths, roulette
 
     def _spread(self, scene, si, ray, sampler, active):
         """Move the shading point of surfaces with subsurface spread.
