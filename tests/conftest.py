@@ -155,6 +155,23 @@ parameters = {fit!r}
 """.replace("'", '"')
 
 
+def with_second_glass(text: str) -> str:
+    """A :func:`sphere_scene_toml` scene with a second glass sphere of another material
+    (``tint``, absorption 2, 6, 10 per metre) beside the first."""
+    return text.replace("[materials.cloth]", """[materials.tint]
+type = "dielectric"
+ior = [1.5, 1.5, 1.5]
+absorption = [2.0, 6.0, 10.0]
+
+[[objects]]
+name = "second"
+mesh = "sphere.ply"
+material = "tint"
+pose = [0.07, 0.0, -0.05, 0.0, 0.0, 0.0]
+
+[materials.cloth]""")
+
+
 def box_object_toml(pose: str | None = None) -> str:
     """A painted box (``box.ply``) as scene-file text; ``pose`` is written as given when given
     (a list, or a ``str.format`` placeholder such as ``"{pose}"``)."""

@@ -14,7 +14,8 @@ from abs.fitting.optimisers import OptimizerState
 from abs.fitting.optimisers.lm import free_refit, levenberg_marquardt
 from abs.model import build_model
 from abs.simulate import simulate_capture
-from conftest import make_backdrop, make_checker, make_env, make_sphere_and_floor, sphere_scene_toml
+from conftest import (make_backdrop, make_checker, make_env, make_sphere_and_floor, sphere_scene_toml,
+                      with_second_glass)
 
 FITTED = ["glass.ior", "glass.absorption", "environment.scale"]
 
@@ -100,18 +101,7 @@ def test_two_glasses_are_recorded_jointly(tmp_path):
     make_checker(tmp_path / "checker.png")
     text = sphere_scene_toml(["glass.absorption", "tint.absorption", "environment.scale"],
                              absorption=[3.0, 3.0, 3.0])
-    text = text.replace("[materials.cloth]", """[materials.tint]
-type = "dielectric"
-ior = [1.5, 1.5, 1.5]
-absorption = [2.0, 6.0, 10.0]
-
-[[objects]]
-name = "second"
-mesh = "sphere.ply"
-material = "tint"
-pose = [0.07, 0.0, -0.05, 0.0, 0.0, 0.0]
-
-[materials.cloth]""")
+    text = with_second_glass(text)
     (tmp_path / "scene.toml").write_text(text)
     simulate_capture(load_scene(tmp_path / "scene.toml"), tmp_path / "capture", n_cameras=2,
                      width=24, height=18, spp=16, seed=2)

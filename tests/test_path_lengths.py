@@ -158,7 +158,8 @@ def test_recording_refuses_parameters_that_move_paths(scene):
 def two_glasses(tmp_path_factory):
     """The small scene with a second glass sphere of another material (``tint``) beside the
     first, and a camera that sees light pass through both (through one, then the other)."""
-    from conftest import make_backdrop, make_checker, make_env, make_sphere_and_floor, sphere_scene_toml
+    from conftest import (make_backdrop, make_checker, make_env, make_sphere_and_floor,
+                          sphere_scene_toml, with_second_glass)
 
     root = tmp_path_factory.mktemp("two_glasses")
     make_sphere_and_floor(root)
@@ -166,18 +167,7 @@ def two_glasses(tmp_path_factory):
     make_env(root / "env.exr")
     make_checker(root / "checker.png")
     text = sphere_scene_toml(["glass.absorption"], absorption=[3.0, 3.0, 3.0])
-    (root / "scene.toml").write_text(text.replace("[materials.cloth]", """[materials.tint]
-type = "dielectric"
-ior = [1.5, 1.5, 1.5]
-absorption = [2.0, 6.0, 10.0]
-
-[[objects]]
-name = "second"
-mesh = "sphere.ply"
-material = "tint"
-pose = [0.07, 0.0, -0.05, 0.0, 0.0, 0.0]
-
-[materials.cloth]"""))
+    (root / "scene.toml").write_text(with_second_glass(text))
     compiled = compile_scene(load_scene(root / "scene.toml"))
     R, t = look_at(np.array([0.2, 0.08, 0.3]), np.array([0.03, 0.05, -0.02]))
     return compiled, Camera(intrinsics_from_fov(W, H, np.radians(40)), R, t, W, H)
