@@ -91,6 +91,7 @@ def test_several_starts_choose_the_fit_start_and_survive_a_resume(small_scene_di
     summary = json.loads((out / "fit.json").read_text())
     assert "Several starts" in (out / "report" / "report.html").read_text()
     printed = capsys.readouterr().out
+    assert "several starts: 2 short fits first (environment.scale = 0.5, 1.6)" in printed
     assert "start environment.scale 0.5 -> " in printed and "<- chosen" in printed
     starts = summary["starts"]
     assert [t["start"] for t in starts["tried"]] == [{"environment.scale": [0.5]},

@@ -69,6 +69,7 @@ def _initial(items: list[str]) -> dict:
 
 
 def run(args) -> int:
+    import numpy as np
     from tqdm import tqdm
 
     from abs.fitting import FitSettings, OptimizerState, fit
@@ -108,6 +109,11 @@ def run(args) -> int:
             resume = OptimizerState.from_dict(saved)
             print(f"resuming after iteration {resume.iteration}")
 
+    if starts and resume is None:
+        count = int(np.prod([len(v) for _, v in starts]))
+        print(f"several starts: {count} short fits first ("
+              + "; ".join(f"{n} = {', '.join(f'{x:g}' for x in v)}" for n, v in starts) + ")",
+              flush=True)
     total = settings.max_iterations + (settings.refinement_steps if settings.method != "adam" else 0)
     bar = tqdm(total=total, desc="fit", unit="it", initial=resume.iteration if resume else 0)
 
