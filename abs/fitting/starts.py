@@ -30,7 +30,7 @@ __all__ = ["StartChoice", "choose_start", "short_settings", "SCORE_PAIRS", "SCOR
 SCORE_PAIRS, SCORE_SPP_FACTOR = 4, 4
 #: Levenberg-Marquardt evaluations of a short fit (enough to settle in a basin, not to finish).
 SHORT_ITERATIONS = 6
-#: Seeds of the scoring renders: clear of those the short fits use (which start at the fit's).
+#: Seeds of the scoring renders, above the fit's seed: clear of those the short fits use.
 _SCORE_SEED = 1000
 
 
@@ -133,8 +133,8 @@ def choose_start(scene, capture, names, settings, initial=None, run_fit=None) ->
         # The end in the vector's layout (a tied parameter's one value).
         theta = np.concatenate([end[n][:1] if n in vector.tied else end[n] for n in vector.names])
         objective = float(np.mean([
-            0.5 * float(problem.residuals(theta, spp, _SCORE_SEED + 2 * k)[0]
-                        @ problem.residuals(theta, spp, _SCORE_SEED + 2 * k + 1)[0])
+            0.5 * float(problem.residuals(theta, spp, settings.seed + _SCORE_SEED + 2 * k)[0]
+                        @ problem.residuals(theta, spp, settings.seed + _SCORE_SEED + 2 * k + 1)[0])
             for k in range(SCORE_PAIRS)]))
         tried.append({"start": {n: [float(v)] for n, v in point.items()},
                       "end": {n: v.tolist() for n, v in end.items()}, "objective": objective})
