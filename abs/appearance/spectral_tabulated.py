@@ -31,7 +31,7 @@ import numpy as np
 
 from abs.io.merl import read_merl
 from abs.io.shared_data import cache_dir
-from abs.render.bsdfs.tabulated import PLUGIN_NAME, CosineSampledTable, table_corners
+from abs.render.bsdfs.tabulated import PLUGIN_NAME, cosine_sampled, table_corners
 from abs.render.jit import from_numpy
 
 __all__ = ["PLUGIN_NAME", "SpectralTabulatedBSDF", "spectral_coefficients", "srgb_model",
@@ -107,6 +107,7 @@ def _cached_coefficients(path: Path) -> np.ndarray:
     return coefficients
 
 
+@cosine_sampled
 class SpectralTabulatedBSDF(mi.BSDF):
     """The MERL-table BSDF of :mod:`abs.render.bsdfs.tabulated` for a spectral variant.
 
@@ -145,12 +146,6 @@ class SpectralTabulatedBSDF(mi.BSDF):
         for index, weight in table_corners(si.wi, wo):
             value += weight * self._entry(index, si.wavelengths, active)
         return value
-
-    _eval = CosineSampledTable._eval
-    eval = CosineSampledTable.eval
-    pdf = CosineSampledTable.pdf
-    eval_pdf = CosineSampledTable.eval_pdf
-    sample = CosineSampledTable.sample
 
     def to_string(self) -> str:
         return f"SpectralTabulatedBSDF[table={self.filename}]"

@@ -39,8 +39,8 @@ import mitsuba as mi  # noqa: E402
 from abs.io.merl import MERL_SHAPE, MERL_SIZE, read_merl  # noqa: E402
 from abs.render.jit import from_numpy  # noqa: E402
 
-__all__ = ["PLUGIN_NAME", "TABLE_KEY", "TabulatedBSDF", "CosineSampledTable", "register",
-           "rusinkiewicz_angles", "table_corners"]
+__all__ = ["PLUGIN_NAME", "TABLE_KEY", "TabulatedBSDF", "CosineSampledTable", "cosine_sampled",
+           "register", "rusinkiewicz_angles", "table_corners"]
 
 PLUGIN_NAME = "abs_tabulated"
 TABLE_KEY = "table"
@@ -136,8 +136,7 @@ class CosineSampledTable:
     (the BRDF in 1/sr, no cosine, as ``mi.Spectrum``): this plugin, and its spectral port in
     :mod:`abs.appearance.spectral_tabulated`, which must subclass a spectral variant's
     ``mi.BSDF`` in another process. A nanobind type takes one base only, so the plugins take
-    these methods as class attributes (``eval = CosineSampledTable.eval``) rather than
-    inheriting them. ``eval`` returns f · cos θo (Mitsuba's convention); sampling is
+    these methods as class attributes (:func:`cosine_sampled`) rather than inheriting them. ``eval`` returns f · cos θo (Mitsuba's convention); sampling is
     cosine-weighted over the upper hemisphere, so a sample's weight is f · π; both directions
     must be above the horizon.
     """
@@ -184,6 +183,15 @@ class CosineSampledTable:
         return bs, dr.select(valid, value / dr.maximum(pdf, 1e-20), 0.0)
 
 
+def cosine_sampled(cls):
+    """Class decorator: give the ``mi.BSDF`` subclass ``cls`` (which defines ``_lookup``) the
+    methods of :class:`CosineSampledTable`."""
+    for name in ("_eval", "eval", "pdf", "eval_pdf", "sample"):
+        setattr(cls, name, getattr(CosineSampledTable, name))
+    return cls
+
+
+@cosine_sampled
 class TabulatedBSDF(mi.BSDF):
     """Isotropic, reciprocal, front-side BRDF given by a MERL-layout table (1/sr).
 
@@ -243,12 +251,6 @@ class TabulatedBSDF(mi.BSDF):
                 value += weight * dr.gather(mi.Float, self.table, index + c * _CHANNEL_STRIDE, active)
             channels.append(value)
         return mi.Color3f(channels[0], channels[1], channels[2])
-
-    _eval = CosineSampledTable._eval
-    eval = CosineSampledTable.eval
-    pdf = CosineSampledTable.pdf
-    eval_pdf = CosineSampledTable.eval_pdf
-    sample = CosineSampledTable.sample
 
     def to_string(self) -> str:
         source = self.filename if self.filename is not None else "set via mi.traverse"
