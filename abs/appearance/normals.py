@@ -86,8 +86,9 @@ def normal_gains(source, target) -> tuple[dict[str, np.ndarray], dict[str, dict]
 
         with_step = without = 0.0
         for fit, test in (halves, halves[::-1]):
-            predicted, truth = _gains(*pooled(fit)), _gains(*pooled(test))
-            weight = pooled(test)[1][..., None]
+            held_out = pooled(test)
+            predicted, truth = _gains(*pooled(fit)), _gains(*held_out)
+            weight = held_out[1][..., None]
             with_step += float(np.sum(weight * np.log(truth / predicted) ** 2))
             without += float(np.sum(weight * np.log(truth) ** 2))
         used = with_step < without
