@@ -25,7 +25,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.appearance.scenes import scene_dict
-from abs.appearance.spectral import render_spectral
+from abs.appearance.spectral import render_spectral, stock_glass_ior
 from abs.errors import InputError
 from abs.render.bsdfs import tabulated as _tabulated  # noqa: F401  (registers abs_tabulated)
 from abs.render.camera import Camera
@@ -111,10 +111,9 @@ def _reconfigure_bsdf(bsdf: dict, squared_roughness: bool, thin_glass: bool) -> 
     elif thin_glass and bsdf["type"] == "abs_dielectric":
         # abs's smooth glass (its scene type "dielectric" compiles to abs's own plugin): the
         # other tool's thin sheet of the same IOR. Only clear, non-dispersive glass has one.
-        ior = np.broadcast_to(np.asarray(bsdf.get("ior", 1.5), np.float64), 3)
-        clear = not np.any(np.asarray(bsdf.get("absorption", 0.0), np.float64))
-        if np.ptp(ior) == 0 and clear and float(bsdf.get("roughness", 0.0)) == 0.0:
-            bsdf = {"type": "thindielectric", "int_ior": float(ior[0]), "ext_ior": 1.0,
+        ior = stock_glass_ior(bsdf)
+        if ior is not None:
+            bsdf = {"type": "thindielectric", "int_ior": ior, "ext_ior": 1.0,
                     **({"id": bsdf["id"]} if "id" in bsdf else {})}
     return bsdf
 

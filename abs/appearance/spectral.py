@@ -26,10 +26,20 @@ import numpy as np
 from abs.errors import InputError
 from abs.io.images import write_exr
 
-__all__ = ["DEFAULT_SPECTRAL_VARIANT", "encode", "render_spectral"]
+__all__ = ["DEFAULT_SPECTRAL_VARIANT", "encode", "render_spectral", "stock_glass_ior"]
 
 DEFAULT_SPECTRAL_VARIANT = "llvm_ad_spectral"
 _MESSAGE_TAIL = 1500  # characters of the worker's standard error quoted in an error
+
+
+def stock_glass_ior(bsdf: dict) -> float | None:
+    """The IOR of an ``abs_dielectric`` scene-dictionary BSDF that stock Mitsuba glass
+    reproduces (one IOR for every channel, clear, smooth); ``None`` for any other."""
+    ior = np.broadcast_to(np.asarray(bsdf.get("ior", 1.5), np.float64), 3)
+    clear = not np.any(np.asarray(bsdf.get("absorption", 0.0), np.float64))
+    if np.ptp(ior) == 0 and clear and float(bsdf.get("roughness", 0.0)) == 0.0:
+        return float(ior[0])
+    return None
 
 
 def encode(value, where: str = "scene"):

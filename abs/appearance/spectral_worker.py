@@ -83,12 +83,14 @@ def _spectral_bsdf(bsdf: dict, where: str) -> dict:
     """
     kind = bsdf.get("type")
     if kind == "abs_dielectric":
-        ior = [float(x) for x in bsdf.get("ior", [1.5] * 3)]
-        absorption = [float(x) for x in bsdf.get("absorption", [0.0] * 3)]
-        if max(ior) != min(ior) or any(absorption) or float(bsdf.get("roughness", 0.0)) != 0.0:
+        from abs.appearance.spectral import stock_glass_ior
+
+        ior = stock_glass_ior(bsdf)
+        if ior is None:
             raise JobError(f"{where}: abs_dielectric with dispersion, absorption or roughness has "
-                           f"no spectral equivalent here (ior {ior}, absorption {absorption})")
-        return {"type": "dielectric", "int_ior": ior[0], "ext_ior": 1.0,
+                           f"no spectral equivalent here (ior {bsdf.get('ior', 1.5)}, absorption "
+                           f"{bsdf.get('absorption', 0.0)})")
+        return {"type": "dielectric", "int_ior": ior, "ext_ior": 1.0,
                 **({"id": bsdf["id"]} if "id" in bsdf else {})}
     if isinstance(kind, str) and kind.startswith("abs_") and kind != "abs_tabulated":
         raise JobError(f"{where}: abs's plugin {kind!r} has no spectral form")
