@@ -24,12 +24,14 @@ def _object_bounds(compiled) -> list[tuple[np.ndarray, np.ndarray]]:
 
 def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: float = 30.0,
                   azimuth_range_deg: tuple[float, float] = (-50.0, 50.0),
-                  elevation_deg: float = 20.0) -> list[dict]:
+                  elevation_deg: float = 20.0, object_fraction: float = 0.5) -> list[dict]:
     """Cameras on an arc in front of the scene (+z side, +y up), looking at its solid objects.
 
     The target is the centre of the bounding box of all non-flat objects (e.g. the glass on the
-    table, not the table or backdrop); the distance makes that box span about half of the
-    vertical field of view.
+    table, not the table or backdrop); the distance makes that box's bounding sphere span
+    ``object_fraction`` of the vertical field of view (default: about half). ``elevation_deg``
+    is the cameras' angle above the horizontal (degrees): low elevations see the backdrop
+    through a low object, as a photographer framing glass before a printed pattern does.
 
     Returns
     -------
@@ -42,7 +44,9 @@ def place_cameras(compiled, n_cameras: int, width: int, height: int, fov_deg: fl
     hi = np.max([b[1] for b in solid], axis=0)
     target = (lo + hi) / 2
     radius = max(float(np.linalg.norm(hi - lo)) / 2, 1e-3)
-    distance = radius / np.tan(np.radians(fov_deg) / 4)
+    if not 0 < object_fraction < 1:
+        raise ValueError(f"object_fraction must lie in (0, 1), got {object_fraction}")
+    distance = radius / np.tan(np.radians(fov_deg) * object_fraction / 2)
     K = intrinsics_from_fov(width, height, np.radians(fov_deg))
     azimuths = np.linspace(*azimuth_range_deg, n_cameras) if n_cameras > 1 else [0.0]
     elev = np.radians(elevation_deg)
@@ -66,8 +70,10 @@ def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width
                      height: int = 240, fov_deg: float = 30.0, spp: int = 512,
                      n_holdout: int | None = None, shot_noise: float = 0.0, read_noise: float = 0.0,
                      seed: int = 0, on_view: Callable[[str], None] | None = None,
-                     render: Callable | None = None):
-    """Render a synthetic capture folder of ``scene`` (see :func:`place_cameras`).
+                     render: Callable | None = None, elevation_deg: float = 20.0,
+                     object_fraction: float = 0.5):
+    """Render a synthetic capture folder of ``scene`` from cameras placed by :func:`place_cameras`
+    (``fov_deg``, ``elevation_deg`` and ``object_fraction`` are passed on).
 
     Writes ``cameras.json``, one EXR per view and ``simulation.json`` (settings and the true value
     of every scalar parameter). The last ``n_holdout`` views are holdout views (default: 1 when
@@ -86,7 +92,8 @@ def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width
 
     folder = Path(folder)
     compiled = compile_scene(scene)
-    views = place_cameras(compiled, n_cameras, width, height, fov_deg)
+    views = place_cameras(compiled, n_cameras, width, height, fov_deg, elevation_deg=elevation_deg,
+                          object_fraction=object_fraction)
     n_holdout = (1 if n_cameras >= 3 else 0) if n_holdout is None else n_holdout
     rng = np.random.default_rng(seed)
     images = {}
@@ -104,7 +111,7 @@ def simulate_capture(scene: Scene, folder: str | Path, n_cameras: int = 4, width
              if spec.size != -1}
     record = {"scene": str(scene.source), "spp": spp, "seed": seed, "shot_noise": shot_noise,
               "read_noise": read_noise, "width": width, "height": height, "fov_deg": fov_deg,
-              "truth": truth}
+              "elevation_deg": elevation_deg, "object_fraction": object_fraction, "truth": truth}
     (folder / "simulation.json").write_text(json.dumps(record, indent=2))
     return capture
 

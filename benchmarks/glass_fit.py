@@ -46,6 +46,8 @@ class Case:
     absorption_per_m: tuple[float, float, float]
     env_scale: float
     start_ior: float = 1.5  # the scene file's (the fit's start without the recipe's several starts)
+    elevation_deg: float = 20.0  # the cameras' (abs.simulate.place_cameras)
+    object_fraction: float = 0.5  # of the vertical field of view the object's bounding sphere spans
 
 
 CASES = [
@@ -53,6 +55,10 @@ CASES = [
     Case("sphere-1.47", "sphere.ply", 1.47, (0.0, 0.0, 0.0), 1.0),
     Case("sphere-1.62", "sphere.ply", 1.62, (2.0, 5.0, 9.0), 1.2),
     Case("bowl-1.52", "bowl.ply", 1.52, (6.0, 2.5, 1.0), 1.3),
+    # The same bowl framed as a photographer frames glass before a pattern: low cameras see the
+    # checkerboard through it (from 20 degrees they see the cloth), and it spans more pixels.
+    Case("bowl-1.52-framed", "bowl.ply", 1.52, (6.0, 2.5, 1.0), 1.3, elevation_deg=5.0,
+         object_fraction=0.9),
     # A start in the wrong basin: one fit from 1.75 ended at 1.646 +- 0.007 with no check.
     Case("sphere-1.47-from-1.75", "sphere.ply", 1.47, (0.0, 0.0, 0.0), 1.0, start_ior=1.75),
 ]
@@ -102,7 +108,7 @@ def mitsuba_photograph(compiled, camera, spp: int, seed: int) -> np.ndarray:
 
 def _truth(case: Case) -> dict:
     return {"ior": case.ior, "absorption_per_m": list(case.absorption_per_m), "env_scale": case.env_scale,
-            "mesh": case.mesh}
+            "mesh": case.mesh, "elevation_deg": case.elevation_deg, "object_fraction": case.object_fraction}
 
 
 def run_case(case: Case, work: Path, args) -> dict:
@@ -121,7 +127,8 @@ def run_case(case: Case, work: Path, args) -> dict:
     if not made.exists() or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}:
         simulate_capture(load_scene(folder / "truth.toml"), folder / "capture", n_cameras=args.views,
                          width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
-                         read_noise=0.003, seed=1, render=mitsuba_photograph)
+                         read_noise=0.003, seed=1, render=mitsuba_photograph,
+                         elevation_deg=case.elevation_deg, object_fraction=case.object_fraction)
         made.write_text(json.dumps({**shape, "truth": _truth(case)}))
     settings = _settings(args.settings)
     if args.single_start:

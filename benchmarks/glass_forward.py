@@ -81,7 +81,8 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     truth = args.work / f"{case.name}-truth.toml"
     truth.write_text(_scene_text(case.mesh, [case.ior] * 3, case.absorption_per_m, case.env_scale))
-    views = place_cameras(compile_scene(load_scene(truth)), args.views, args.width, args.height)
+    views = place_cameras(compile_scene(load_scene(truth)), args.views, args.width, args.height,
+                          elevation_deg=case.elevation_deg, object_fraction=case.object_fraction)
     cameras = [Camera(np.asarray(v["K"]), np.asarray(v["R"]), np.asarray(v["t"]), args.width,
                       args.height) for v in views]
 

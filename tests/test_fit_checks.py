@@ -104,3 +104,12 @@ def test_a_parameter_the_renders_noise_moved_is_announced_once_the_spheres_are_n
                                                "stderr": [0.11, 0.11, 0.1],
                                                "refinement_limited": [0.92, 0.92, 0.92]}
     assert not any("random walk" in c for c in run_checks(clear, BOUNDS, KINDS))
+
+
+def test_standard_errors_without_their_monte_carlo_part_are_named():
+    """Two refinement steps leave one averaged point: the renders' Monte-Carlo error of the values
+    is not measured, and the standard errors (photographs' noise only) are said to be too small."""
+    short = [c for c in run_checks(_summary(monte_carlo_points=1, method="lm"), BOUNDS, KINDS)
+             if "Monte-Carlo error" in c]
+    assert len(short) == 1 and "had 1" in short[0] and "--refinement-steps" in short[0]
+    assert run_checks(_summary(monte_carlo_points=3, method="lm"), BOUNDS, KINDS) == []

@@ -50,6 +50,9 @@ def add_parser(sub) -> None:
                    help="several starts: a short fit from each value (every channel), the full fit "
                         "from the best end; for an IOR before a textured backdrop, e.g. "
                         "glass.ior=1.45,1.55,1.65,1.75 (repeatable: every combination)")
+    p.add_argument("--glass-spp-factor", type=int, default=1, metavar="F",
+                   help="F times the samples per pixel where glass is seen (its refractions are the "
+                        "images' noisiest part and measure its IOR); default 1")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -91,7 +94,8 @@ def run(args) -> int:
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
-        seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts)
+        seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts,
+        glass_spp_factor=args.glass_spp_factor)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

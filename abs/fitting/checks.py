@@ -5,7 +5,8 @@ that those numbers are not a solution: a direction the photographs do not constr
 curvature is singular there) or constrain so loosely that the value is not measured, a parameter
 pinned at a bound or outside the range its material can physically have (a glass IOR of 2.18 is
 no glass; a fit there found a wrong basin), a parameter that the renders' Monte-Carlo noise rather
-than the photographs moved (its refinement steps cut to the trust radius nearly every time), two
+than the photographs moved (its refinement steps cut to the trust radius nearly every time),
+standard errors without the renders' Monte-Carlo part (too few refinement steps to measure it), two
 parameters that trade off almost perfectly, and a holdout residual that stays far above the
 photographs' noise (the model leaves out physics, or the fit stopped in a wrong minimum). They
 are written to ``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the
@@ -161,6 +162,13 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
                     f"({plausible[0]:g} to {plausible[1]:g}): the fit most likely found a wrong "
                     "basin. Start closer (abs glass rgb gives physical values), tie the channels, "
                     "or fit at a coarser resolution first.")
+    if summary.get("monte_carlo_points", 2) < 2:
+        checks.append(
+            "The standard errors count the photographs' noise only: the renders' Monte-Carlo error "
+            "of the values, measured from the scatter of the refinement's points, needs at least "
+            f"two points and this fit ({summary.get('method', '?')}) had "
+            f"{summary['monte_carlo_points']}, so the errors may be far too small. Fit with --method lm and "
+            "--refinement-steps 4 or more.")
     corr = summary.get("correlation") or {}
     labels, matrix = corr.get("names", []), corr.get("matrix", [])
     for i in range(len(labels)):

@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from abs.fitting.checks import run_checks
-from abs.fitting.laplace import LaplaceApproximation, laplace, with_monte_carlo_error
+from abs.fitting.laplace import LaplaceApproximation, laplace, monte_carlo_spread, with_monte_carlo_error
 from abs.fitting.objective import Objective
 from abs.fitting.optimisers import OptimizerState, get
 from abs.fitting.optimisers.lm import pair_seeds
@@ -65,6 +65,7 @@ class FitResult:
     scan: dict | None = None
     limited: dict[str, np.ndarray] | None = None
     starts: StartChoice | None = None
+    monte_carlo_points: int = 0
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -94,11 +95,31 @@ class FitResult:
             "wall_s": round(self.wall_s, 3),
             "iterations": self.iterations,
             "method": self.method,
+            # Iterates whose scatter gave the standard errors' Monte-Carlo part (0 or 1: none).
+            "monte_carlo_points": self.monte_carlo_points,
             "image_noise": self.image_noise,
             "checks": list(self.checks),
             **({"scan": self.scan} if self.scan else {}),
             **({"starts": self.starts.to_dict()} if self.starts is not None else {}),
         }
+
+
+def _refinement_curvatures(found, objective: Objective) -> list[np.ndarray]:
+    """An optimiser's cross curvatures of the weighted residuals in ``z``
+    (:meth:`~abs.fitting.optimisers.Optimiser.curvatures`) in :func:`laplace`'s units: ``J^T J``
+    of the pixel residuals in physical units, without the priors' rows (which :func:`laplace`
+    adds itself). The objective's Jacobian is ``J dtheta/dz / sigma`` with the priors'
+    ``dtheta/dz / sd`` below, so each is ``sigma^2 (H / (d d^T) - diag(1 / sd^2))`` with ``d``
+    the transform's derivative where it was rendered."""
+    if found is None:
+        return []
+    precision = np.where(objective.has_prior, 1.0 / np.square(objective.prior_sd), 0.0)
+    out = []
+    for H, z in zip(*found):
+        d = objective.vector.derivative(z)
+        if np.all(np.abs(d) > 1e-150):  # a coordinate deep at a bound: its scale is lost
+            out.append(objective.sigma ** 2 * (H / np.outer(d, d) - np.diag(precision)))
+    return out
 
 
 def _metrics(observations, renders) -> dict[str, float]:
@@ -178,7 +199,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         starts = choose_start(scene, capture, parameters, settings, initial)
     if starts is not None:
         initial = {**(initial or {}), **starts.values}
-    model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight)
+    model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight,
+                        settings.glass_spp_factor)
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
@@ -225,18 +247,23 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
     prior = np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None
     J2 = problem.jacobian(theta, settings.spp, seeds[2])
-    uncertainty = laplace(r, J, prior, jacobian2=J2)
-    # A curvature that one pair of noisy Jacobians leaves unresolved may be resolved by more
-    # pairs (an IOR's column through glass is noisy): up to three more before saying so.
+    # The refinement's own Jacobian pairs near the optimum average into the curvature: an IOR's
+    # column through glass is noisy, and one pair's cross curvature can leave it unresolved.
+    nearby = _refinement_curvatures(optimiser.curvatures(state), objective)
+    uncertainty = laplace(r, J, prior, jacobian2=J2, curvatures=nearby)
+    # A curvature still unresolved may be resolved by more pairs at the optimum: up to three
+    # more before saying so.
     more = []
     while not uncertainty.identifiable.all() and len(more) < 3:
         seed = settings.seed + 90 - 2 * len(more)
         more.append((problem.jacobian(theta, settings.spp, seed), problem.jacobian(theta, settings.spp, seed - 1)))
-        uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more)
+        uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more, curvatures=nearby)
     points, scatter = optimiser.averaged_points(state), optimiser.scatter_points(state)
+    monte_carlo_points = 0
     if points is not None:
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
         uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter))
+        monte_carlo_points = len(monte_carlo_spread(points, scatter))
 
     limited = optimiser.limited_steps(state)
     limited = None if limited is None or not len(limited) else vector.split(np.mean(limited, axis=0))
@@ -260,7 +287,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
                        metrics, method, state.iteration, renders, samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
-                       scan=scans, limited=limited, starts=starts)
+                       scan=scans, limited=limited, starts=starts,
+                       monte_carlo_points=monte_carlo_points)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)

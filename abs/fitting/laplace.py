@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error"]
+__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "monte_carlo_spread"]
 
 
 @dataclass(frozen=True)
@@ -51,36 +51,42 @@ def _from_covariance(cov: np.ndarray, pixel_sigma: float, identifiable: np.ndarr
     return LaplaceApproximation(cov, stderr, correlation, pixel_sigma, identifiable)
 
 
+def monte_carlo_spread(points: np.ndarray, scatter: np.ndarray | None = None) -> np.ndarray:
+    """The iterates (m, P) whose scatter measures the Monte-Carlo error of the mean of ``points``
+    (n, P): ``points`` themselves, or ``scatter`` when fewer than three points were averaged and
+    ``scatter`` holds more (one or two arrived points say nothing of their spread; iterates that
+    include some of the approach scatter more, so the error comes out conservative rather than
+    missing). Fewer than two rows: the error cannot be measured."""
+    points = np.atleast_2d(np.asarray(points, np.float64))
+    if points.shape[0] < 3 and scatter is not None and np.atleast_2d(scatter).shape[0] > points.shape[0]:
+        return np.atleast_2d(np.asarray(scatter, np.float64))
+    return points
+
+
 def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
                           scatter: np.ndarray | None = None) -> LaplaceApproximation:
     """Add the Monte-Carlo error of an estimate that is the mean of ``points`` (n, P).
 
     The refinement's estimate is the mean of iterates that scatter around the solution because
     each step sees a different noisy render; the covariance of that mean,
-    ``cov(points) / n``, is added to the Laplace covariance (with fewer than three points only
-    its diagonal, a covariance from two points being rank one).
-
-    ``scatter`` (m, P), optional: a larger set of iterates to take the scatter from when few were
-    averaged (one or two arrived points say nothing of their spread; iterates that include some
-    of the approach scatter more, so the error comes out conservative rather than missing).
+    ``cov(spread) / n``, is added to the Laplace covariance, ``spread`` being
+    :func:`monte_carlo_spread` of ``points`` and ``scatter`` (with fewer than three rows only its
+    diagonal, a covariance from two points being rank one; with fewer than two nothing).
     """
-    points = np.atleast_2d(np.asarray(points, np.float64))
-    n = points.shape[0]
-    spread = points
-    if n < 3 and scatter is not None and np.atleast_2d(scatter).shape[0] > n:
-        spread = np.atleast_2d(np.asarray(scatter, np.float64))
+    n = np.atleast_2d(points).shape[0]
+    spread = monte_carlo_spread(points, scatter)
     if spread.shape[0] < 2:
         return approx
     extra = np.atleast_2d(np.cov(spread, rowvar=False)) / n
-    n = spread.shape[0]
-    if n < 3:
+    if spread.shape[0] < 3:
         extra = np.diag(np.diag(extra))
     return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)
 
 
 def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | None = None,
             jacobian2: np.ndarray | None = None,
-            more_pairs: Sequence[tuple[np.ndarray, np.ndarray]] = ()) -> LaplaceApproximation:
+            more_pairs: Sequence[tuple[np.ndarray, np.ndarray]] = (),
+            curvatures: Sequence[np.ndarray] = ()) -> LaplaceApproximation:
     """Laplace approximation from residuals (M,) and their Jacobian (M, P) at the optimum.
 
     Parameters
@@ -96,6 +102,10 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
         Further independent Jacobian pairs at the same point: the cross curvature is averaged
         over all pairs (a noisy column, an IOR seen through glass, can leave one pair's estimate
         unresolved where the average is not).
+    curvatures : sequence of ndarray, shape (P, P)
+        Further cross-curvature estimates ``(J1^T J2 + J2^T J1) / 2`` from independent pairs
+        near the same point (a refinement's steps), averaged with the pairs' (needs
+        ``jacobian2``).
     """
     m, p = jacobian.shape
     sigma2 = float(residuals @ residuals) / max(m - p, 1)
@@ -103,7 +113,8 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
         curvature = jacobian.T @ jacobian
     else:
         pairs = [(jacobian, jacobian2), *more_pairs]
-        curvature = np.mean([0.5 * (a.T @ b + b.T @ a) for a, b in pairs], axis=0)
+        curvature = np.mean([0.5 * (a.T @ b + b.T @ a) for a, b in pairs]
+                            + [np.asarray(h, np.float64) for h in curvatures], axis=0)
     precision = curvature / max(sigma2, 1e-300)
     if prior_sd is not None:
         precision = precision + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))

@@ -82,6 +82,10 @@ class FitSettings:
         combination), and the full fit starts where the best one ended. For an objective with
         more than one basin (an IOR seen through a sphere before a checkerboard). Empty: one
         start.
+    glass_spp_factor : int
+        Pixels where glass is seen (the rectangle around its objects' projected bounding boxes)
+        take this many times ``spp``: their refractions are the noisiest part of the images
+        and what an IOR is measured by (:class:`abs.render.camera.SampleBoost`). 1: none.
     """
 
     method: str = "auto"
@@ -100,6 +104,7 @@ class FitSettings:
     tie: tuple[str, ...] = ()
     reweight: bool = True
     starts: tuple[tuple[str, tuple[float, ...]], ...] = ()
+    glass_spp_factor: int = 1
 
     def __post_init__(self):
         from abs.fitting.optimisers import names
@@ -108,8 +113,8 @@ class FitSettings:
         if self.method not in known:
             raise ValueError(f"method must be {', '.join(known[:-1])} or {known[-1]}, "
                              f"not {self.method!r}")
-        if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1:
-            raise ValueError("spp, downsample and max_iterations must be >= 1")
+        if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1 or self.glass_spp_factor < 1:
+            raise ValueError("spp, downsample, max_iterations and glass_spp_factor must be >= 1")
         for entry in self.starts:
             if (len(entry) != 2 or not isinstance(entry[0], str) or not len(entry[1])
                     or not all(np.isfinite(float(v)) for v in entry[1])):

@@ -18,7 +18,7 @@ import numpy as np
 from abs.errors import InputError
 from abs.model.counter import RenderCounter
 from abs.model.inputs import prepare
-from abs.model.observations import observe
+from abs.model.observations import boost_where_seen, observe
 from abs.model.parameters import ParameterVector
 from abs.model.problem import FitProblem
 
@@ -46,6 +46,9 @@ class ForwardModel:
     reweight : bool
         Whether its problems render from path-length recordings where every varying parameter
         reweights (:attr:`~abs.model.problem.FitProblem.uses_recordings`).
+    glass_spp_factor : int
+        Pixels where glass is seen take this many times the samples per pixel
+        (:func:`~abs.model.observations.boost_where_seen`; 1: none).
     """
 
     scene: object
@@ -54,6 +57,7 @@ class ForwardModel:
     vector: ParameterVector
     counter: RenderCounter = field(default_factory=RenderCounter)
     reweight: bool = True
+    glass_spp_factor: int = 1
     _problems: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -90,15 +94,17 @@ class ForwardModel:
         if key not in self._problems:
             chosen = {"train": self.capture.train_views, "holdout": self.capture.holdout_views,
                       "all": self.capture.views}[views]
-            self._problems[key] = FitProblem(self.compiled, self.vector,
-                                             [observe(v, downsample) for v in chosen], clamp,
+            glass = self.compiled.transmissive_bounds() if self.glass_spp_factor > 1 else []
+            observed = [boost_where_seen(observe(v, downsample), glass, self.glass_spp_factor)
+                        for v in chosen]
+            self._problems[key] = FitProblem(self.compiled, self.vector, observed, clamp,
                                              counter=self.counter, reweight=self.reweight)
         return self._problems[key]
 
 
 def build_model(scene, capture, parameters: Sequence[str] | None = None,
                 initial: Mapping[str, object] | None = None, tied: Sequence[str] = (),
-                reweight: bool = True) -> ForwardModel:
+                reweight: bool = True, glass_spp_factor: int = 1) -> ForwardModel:
     """Load, compile and check a scene and capture, and lay out the parameters that vary.
 
     Parameters
@@ -120,6 +126,8 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
     reweight : bool
         Render from path-length recordings where the parameters allow (``False``: always render,
         as the seeds' scan does).
+    glass_spp_factor : int
+        More samples where glass is seen (:class:`ForwardModel`).
 
     Returns
     -------
@@ -144,4 +152,7 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
                                        tuple(tied))
     except ValueError as exc:
         raise InputError(None, "tie", str(exc)) from None
-    return ForwardModel(scene, compiled, capture, vector, reweight=reweight)
+    if int(glass_spp_factor) < 1:
+        raise InputError(None, "glass_spp_factor", f"must be >= 1, not {glass_spp_factor}")
+    return ForwardModel(scene, compiled, capture, vector, reweight=reweight,
+                        glass_spp_factor=int(glass_spp_factor))

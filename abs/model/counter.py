@@ -24,7 +24,8 @@ class RenderCounter:
         pass of an IOR counts the renders its central difference makes, two or three, see
         ``CompiledScene.forward_renders``).
     samples : int
-        Camera samples traced: ``width * height * spp`` summed over the renders.
+        Camera samples traced: ``width * height * spp`` (and a sample boost's extra ones) summed
+        over the renders.
     """
 
     renders: int = 0
@@ -33,4 +34,4 @@ class RenderCounter:
     def add(self, camera, spp: int) -> None:
         """Count one render of ``camera`` (pixels) at ``spp`` samples per pixel."""
         self.renders += 1
-        self.samples += camera.width * camera.height * spp
+        self.samples += camera.samples(spp)

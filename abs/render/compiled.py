@@ -302,7 +302,7 @@ class CompiledScene:
     @staticmethod
     def _batches(camera: Camera, spp: int, samples_in_flight: int) -> list[int]:
         """spp split into batches of at most ``samples_in_flight`` camera samples."""
-        per = max(1, min(spp, samples_in_flight // (camera.width * camera.height)))
+        per = max(1, min(spp, samples_in_flight // camera.samples(1)))
         return [per] * (spp // per) + ([spp % per] if spp % per else [])
 
     def render(self, camera: Camera, spp: int | None = None, seed: int = 0,
@@ -572,6 +572,13 @@ class CompiledScene:
 
 
     # ------------------------------------------------------- recordings
+    def transmissive_bounds(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """World bounding boxes ``(lower, upper)`` (m) of the objects made of a transmissive
+        material (glass): where a camera sees refraction."""
+        transmissive = {name for name, m in self.scene.materials.items() if m.transmissive}
+        return [(np.array(s.bbox().min, float).ravel(), np.array(s.bbox().max, float).ravel())
+                for s in self.mitsuba_scene.shapes() if s.bsdf().id() in transmissive]
+
     def glass_material(self) -> str | None:
         """The one glass material whose absorption a recording reweights by default: the only
         transmissive material with an absorption field, ``None`` without glass."""

@@ -236,13 +236,13 @@ class PathTracer:
         """
         split = self._split(scene, dispersion)
         with dr.suspend_grad():
-            sampler, ray, _ = self._camera_rays(camera, spp, seed)
+            sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
             radiance, _ = self.trace(scene, env, ray, sampler, split, "primal")
             dr.eval(radiance)
-            image = self._film(radiance, camera.width, camera.height, spp)
+            image = self._film(radiance, camera, spp, pixel, share)
         weight = adjoint(image).array
-        sampler, ray, pixel = self._camera_rays(camera, spp, seed)
-        inv_spp = opaque(mi.Float, 1.0 / spp)
+        sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
+        inv_spp = opaque(mi.Float, 1.0 / spp) * (1.0 if share is None else share)
         per_sample = mi.Color3f(*[dr.gather(mi.Float, weight, pixel * 3 + c) * inv_spp for c in range(3)])
         self._trace_adjoint(scene, env, ray, sampler, split, radiance, per_sample)
         return image
@@ -298,7 +298,7 @@ class PathTracer:
         targets = tuple(opaque(mi.UInt32, dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(g))[0])
                         for g in glasses)
         with dr.suspend_grad():
-            sampler, ray, pixel = self._camera_rays(camera, spp, seed)
+            sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
             state = (sampler, ray, mi.Color3f(1.0), mi.Bool(True), mi.Float(1.0), mi.Bool(True),
                      mi.UInt32(0), tuple(mi.Float(0.0) for _ in targets), mi.Color3f(1.0))
 
@@ -311,7 +311,7 @@ class PathTracer:
                     glass_ids=targets, roulette=roulette)
                 # This vertex's light has been attenuated along ``lengths``; the segment that
                 # ended here (if in a glass) attenuates the light of the vertices after it.
-                bin_light(histogram, pixel, light, lengths, bins)
+                bin_light(histogram, pixel, light if share is None else light * share, lengths, bins)
                 return (sampler, ray, beta, active, prev_pdf, prev_delta, depth + 1,
                         tuple(a + b for a, b in zip(lengths, glass_lengths)), roulette)
 
@@ -348,19 +348,36 @@ class PathTracer:
 
     @staticmethod
     def _camera_rays(camera: Camera, spp: int, seed: int):
-        """The sampler and camera rays of a render: ``spp`` consecutive lanes per pixel.
+        """The sampler and camera rays of a render: ``spp`` consecutive lanes per pixel, then the
+        extra lanes of a :class:`~abs.render.camera.SampleBoost` (``spp * (factor - 1)``
+        consecutive ones per boosted pixel, row by row).
 
-        Returns ``(sampler, ray, pixel)``; the same ``(camera, spp, seed)`` gives the same rays and
-        the same sampler state, which path replay relies on.
+        Returns ``(sampler, ray, pixel, share)``: ``share`` is each lane's weight relative to
+        ``1 / spp`` (``1 / factor`` in boosted pixels), ``None`` without a boost. The same
+        ``(camera, spp, seed)`` gives the same rays and the same sampler state, which path replay
+        relies on; the lanes of the unboosted pixels are those of the camera without the boost.
         """
         w, h = camera.width, camera.height
-        n = w * h * spp
+        n = camera.samples(spp)
         sampler = mi.load_dict({"type": "independent"})
         # Sizes and seeds enter kernels as memory, not literals: another spp, resolution or seed
         # must reuse the compiled kernels.
         sampler.seed(opaque(mi.UInt32, seed32(seed)), n)
-        pixel = dr.arange(mi.UInt32, n) // opaque(mi.UInt32, spp)
+        lane = dr.arange(mi.UInt32, n)
+        pixel = lane // opaque(mi.UInt32, spp)
         width = opaque(mi.UInt32, w)
+        share, boost = None, camera.boost
+        if boost is not None:
+            base = opaque(mi.UInt32, w * h * spp)
+            extra = lane >= base
+            j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, spp * (boost.factor - 1))
+            columns = opaque(mi.UInt32, boost.x1 - boost.x0)
+            pixel = dr.select(extra, (opaque(mi.UInt32, boost.y0) + j // columns) * width
+                              + opaque(mi.UInt32, boost.x0) + j % columns, pixel)
+            x, y = pixel % width, pixel // width
+            inside = ((x >= opaque(mi.UInt32, boost.x0)) & (x < opaque(mi.UInt32, boost.x1))
+                      & (y >= opaque(mi.UInt32, boost.y0)) & (y < opaque(mi.UInt32, boost.y1)))
+            share = dr.select(inside, opaque(mi.Float, 1.0 / boost.factor), 1.0)
         px = mi.Float(pixel % width)
         py = mi.Float(pixel // width)
         offset = sampler.next_2d()
@@ -374,25 +391,31 @@ class PathTracer:
             dx = (pick.x - (b - 1) / 2 + dx) / b
             dy = (pick.y - (b - 1) / 2 + dy) / b
         origin, d = camera.rays(px + dx, py + dy)
-        return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel
+        return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel, share
 
     def _render_pass(self, scene, env, camera, spp, seed, split, mode):
-        sampler, ray, _ = self._camera_rays(camera, spp, seed)
+        sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
         radiance, tangent = self.trace(scene, env, ray, sampler, split, mode)
         # Evaluate all channels in one launch: reducing channel by channel from the unevaluated
         # loop would run the whole path-tracing kernel once per channel.
         dr.eval(radiance, tangent)
-        w, h = camera.width, camera.height
-        images = [self._film(radiance, w, h, spp)]
-        images.append(self._film(tangent, w, h, spp) if tangent is not None else None)
+        images = [self._film(radiance, camera, spp, pixel, share)]
+        images.append(self._film(tangent, camera, spp, pixel, share) if tangent is not None else None)
         return images
 
     @staticmethod
-    def _film(radiance: mi.Color3f, w: int, h: int, spp: int) -> mi.TensorXf:
-        # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
+    def _film(radiance: mi.Color3f, camera: Camera, spp: int, pixel: mi.UInt32,
+              share: mi.Float | None) -> mi.TensorXf:
+        """Each pixel's estimate from its lanes (:meth:`_camera_rays`)."""
+        w, h = camera.width, camera.height
         inv_spp = opaque(mi.Float, 1.0 / spp)
-        values = [dr.block_sum(c, spp) * inv_spp for c in (radiance.x, radiance.y, radiance.z)]
         flat = dr.zeros(mi.Float, w * h * 3)
+        if share is not None:  # boosted pixels own more lanes: weighted sums by pixel
+            for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
+                dr.scatter_reduce(dr.ReduceOp.Add, flat, value * share * inv_spp, pixel * 3 + c)
+            return mi.TensorXf(flat, (h, w, 3))
+        # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
+        values = [dr.block_sum(c, spp) * inv_spp for c in (radiance.x, radiance.y, radiance.z)]
         lane = dr.arange(mi.UInt32, w * h)
         for c in range(3):
             dr.scatter(flat, values[c], lane * 3 + c)

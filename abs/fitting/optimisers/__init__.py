@@ -117,6 +117,12 @@ class Optimiser(abc.ABC):
         holds few (see :func:`abs.fitting.laplace.with_monte_carlo_error`); ``None``: use those."""
         return None
 
+    def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
+        """Cross-curvature estimates ``J^T J`` (K, P, P; unconstrained coordinates) the optimiser
+        made near its answer, and the points ``z`` (K, P) they were made at, for the Laplace
+        approximation to average; ``None`` when it keeps none."""
+        return None
+
     def limited_steps(self, state: OptimizerState) -> np.ndarray | None:
         """Bool (K, P): per step of the averaging phase and coordinate, whether the optimiser's
         own step was cut to a trust radius (read by :func:`abs.fitting.checks.run_checks` through

@@ -53,6 +53,12 @@ class RefinementState:
         trust radius (and was clipped). A coordinate limited at nearly every step is moved by the
         renders' noise, not by the photographs (:meth:`LevenbergMarquardt.limited_steps`). Empty in
         checkpoints from before it was kept.
+    curvatures : tuple of ndarray
+        Per step, the cross curvature ``(J1^T J2 + J2^T J1) / 2`` (P, P; unconstrained
+        coordinates) of its two independent Jacobians, unfloored, and ``curvature_at`` the
+        point ``z`` they were rendered at: the Laplace approximation averages those of the
+        steps whose points are averaged (:meth:`LevenbergMarquardt.curvatures`). Empty in
+        checkpoints from before they were kept.
     """
 
     points: tuple = ()
@@ -60,6 +66,8 @@ class RefinementState:
     radius: np.ndarray | None = None
     step: np.ndarray | None = None
     limited: tuple = ()
+    curvatures: tuple = ()
+    curvature_at: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,6 +103,9 @@ class LMState:
                        refinement_step=None if r.step is None else np.asarray(r.step).tolist())
             if r.limited:  # absent from checkpoints written before it was kept
                 out["refinement_limited"] = [list(map(bool, row)) for row in r.limited]
+            if r.curvatures:
+                out["refinement_curvatures"] = [np.asarray(h).tolist() for h in r.curvatures]
+                out["refinement_curvature_at"] = [np.asarray(z).tolist() for z in r.curvature_at]
         return out
 
     @classmethod
@@ -109,7 +120,11 @@ class LMState:
                                      None if radius is None else np.asarray(radius, np.float64),
                                      None if step is None else np.asarray(step, np.float64),
                                      tuple(tuple(bool(c) for c in row)
-                                           for row in d.get("refinement_limited", [])))
+                                           for row in d.get("refinement_limited", [])),
+                                     tuple(np.asarray(h, np.float64)
+                                           for h in d.get("refinement_curvatures", [])),
+                                     tuple(np.asarray(z, np.float64)
+                                           for z in d.get("refinement_curvature_at", [])))
         converged = d.get("lm_converged")
         return cls(None if converged is None else bool(converged), refinement,
                    bool(d.get("recording_pairs", False)))
@@ -176,6 +191,21 @@ class LevenbergMarquardt(Optimiser):
             return np.asarray(refinement.points, np.float64)
         # All but the first quarter, arrived or not.
         return averaged_refinement_points(refinement.points)
+
+    def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
+        """The refinement's cross curvatures (K, P, P) and the points ``z`` (K, P) they were
+        rendered at, for the steps after the first quarter (those of :meth:`scatter_points`):
+        each an unbiased estimate of ``J^T J`` near the solution, from renders as independent as
+        the final Laplace approximation's pair. ``None`` without Gauss-Newton steps or their
+        record."""
+        solver = state.solver or LMState()
+        refinement = solver.refinement
+        n = len(refinement.points)
+        if solver.pairs or n < 2 or len(refinement.curvatures) != n:
+            return None
+        start = max(1, n // 4)
+        return (np.asarray(refinement.curvatures[start:], np.float64),
+                np.asarray(refinement.curvature_at[start:], np.float64))
 
     def limited_steps(self, state: OptimizerState) -> np.ndarray | None:
         """Per refinement step after the first quarter (the steps to :meth:`scatter_points`),
@@ -518,6 +548,9 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
     travelling = list(saved.clipped) if saved.clipped else [False] * len(points)
     # A refinement resumed from a checkpoint without the record keeps none (not a partial one).
     limited = list(saved.limited) if len(saved.limited) == len(points) else None
+    kept = len(saved.curvatures) == len(points) == len(saved.curvature_at)
+    curvatures = list(saved.curvatures) if kept else None
+    curvature_at = list(saved.curvature_at) if kept else None
     radius = np.full(np.size(state.z), float(max_step))
     if saved.radius is not None:
         radius = np.broadcast_to(np.asarray(saved.radius, np.float64), radius.shape).copy()
@@ -531,6 +564,9 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
         r, (J1, J2), loss = evaluate(z, state.iteration)
         state.history.append({"iteration": state.iteration, "loss": float(loss),
                               "z": list(map(float, z)), "phase": "refinement"})
+        if curvatures is not None:
+            curvatures.append(0.5 * (J1.T @ J2 + J2.T @ J1))
+            curvature_at.append(np.array(z, np.float64))
         step = np.linalg.solve(cross_curvature(J1, J2), -0.5 * (J1 + J2).T @ r)
         if previous is not None:
             same = np.sign(step) == np.sign(np.asarray(previous, np.float64))
@@ -553,7 +589,9 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
         previous = step
         solver = replace(solver, refinement=RefinementState(tuple(points), tuple(travelling),
                                                             radius.copy(), step,
-                                                            tuple(limited or ())))
+                                                            tuple(limited or ()),
+                                                            tuple(curvatures or ()),
+                                                            tuple(curvature_at or ())))
         state.solver = solver
         state.z = np.mean(averaged_refinement_points(points, travelling), axis=0)
         if on_iteration is not None:
