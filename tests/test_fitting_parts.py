@@ -475,3 +475,29 @@ def test_refinement_curvatures_resolve_a_noisy_column_in_the_laplace_units():
     assert np.allclose(np.array(again.refinement.curvatures), np.array(state.solver.refinement.curvatures))
     assert np.allclose(np.array(again.refinement.curvature_at),
                        np.array(state.solver.refinement.curvature_at))
+
+
+def test_monte_carlo_error_of_a_walk_covers_its_mean():
+    """Sequential iterates that walk (AR(1), autocorrelation 0.7, as the distant bowl's IOR) have
+    a mean that varies far more than ``cov / n``: corrected by the autocorrelation, the error
+    covers the truth at about the stated rate; independent scatter keeps ``cov / n``."""
+    rng = np.random.default_rng(5)
+    base = laplace(np.full(50, 1e-3), np.eye(50, 1) * 1e3)  # a negligible Laplace part
+    covered_walk = covered_plain = 0
+    trials, n, rho = 400, 12, 0.7
+    for _ in range(trials):
+        x = np.empty(n)
+        x[0] = rng.normal() / np.sqrt(1 - rho ** 2)
+        for i in range(1, n):
+            x[i] = rho * x[i - 1] + rng.normal()
+        err = with_monte_carlo_error(base, x[:, None], sequential=True).stderr[0]
+        naive = with_monte_carlo_error(base, x[:, None]).stderr[0]
+        covered_walk += abs(x.mean()) <= 1.96 * err
+        covered_plain += abs(x.mean()) <= 1.96 * naive
+    # cov / n alone covers about half the time; the correction brings it to about 80 % (the
+    # variance from 12 correlated points is still low, so short of 95 %).
+    assert covered_plain / trials < 0.65
+    assert covered_walk / trials > 0.74, covered_walk / trials
+    independent = rng.normal(size=(12, 1))
+    assert (with_monte_carlo_error(base, independent, sequential=True).stderr[0]
+            <= with_monte_carlo_error(base, independent).stderr[0] * 1.6)

@@ -66,6 +66,13 @@ def test_every_render_mode_sees_the_same_boosted_samples(scene):
     _, d_recorded = compiled.render_recorded_forward(recording, boosted,
                                                      {"glass.absorption": [1.0, 1.0, 1.0]})
     np.testing.assert_allclose(d_recorded.numpy(), derivative.numpy(), rtol=2e-2, atol=1e-5)
+    # Path replay of the same samples: the gradient of sum(w * image) is the forward
+    # derivative's sum(w * d image) (absorption changes no path).
+    w = np.random.default_rng(0).normal(size=(H, W, 3))
+    replayed, gradient = compiled.render_backward(boosted, w, ["glass.absorption"], spp=SPP, seed=5)
+    np.testing.assert_allclose(replayed, image, rtol=1e-5, atol=1e-6)
+    assert np.sum(gradient["glass.absorption"]) == pytest.approx(float(np.sum(w * derivative.numpy())),
+                                                                  rel=1e-3)
 
 
 def test_the_boost_covers_where_the_glass_is_seen_and_its_samples_count(scene, small_scene_dir):

@@ -262,7 +262,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     monte_carlo_points = 0
     if points is not None:
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
-        uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter))
+        uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter),
+                                             sequential=optimiser.sequential_points(state))
         monte_carlo_points = len(monte_carlo_spread(points, scatter))
 
     limited = optimiser.limited_steps(state)

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "monte_carlo_spread"]
+__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "monte_carlo_spread",
+           "lag1_autocorrelation"]
 
 
 @dataclass(frozen=True)
@@ -63,8 +64,24 @@ def monte_carlo_spread(points: np.ndarray, scatter: np.ndarray | None = None) ->
     return points
 
 
+#: Fewest sequential points from which a lag-1 autocorrelation is estimated.
+_AUTOCORRELATION_POINTS = 6
+#: Largest lag-1 autocorrelation used (a walk estimated from a dozen points).
+_MAX_AUTOCORRELATION = 0.9
+
+
+def lag1_autocorrelation(points: np.ndarray) -> np.ndarray:
+    """Lag-1 autocorrelation of each coordinate of the sequence ``points`` (n, P); 0 for a
+    coordinate that does not vary."""
+    x = np.atleast_2d(np.asarray(points, np.float64))
+    x = x - x.mean(axis=0)
+    var = np.sum(x * x, axis=0)
+    return np.where(var > 0, np.sum(x[1:] * x[:-1], axis=0) / np.where(var > 0, var, 1.0), 0.0)
+
+
 def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
-                          scatter: np.ndarray | None = None) -> LaplaceApproximation:
+                          scatter: np.ndarray | None = None,
+                          sequential: bool = False) -> LaplaceApproximation:
     """Add the Monte-Carlo error of an estimate that is the mean of ``points`` (n, P).
 
     The refinement's estimate is the mean of iterates that scatter around the solution because
@@ -72,6 +89,14 @@ def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
     ``cov(spread) / n``, is added to the Laplace covariance, ``spread`` being
     :func:`monte_carlo_spread` of ``points`` and ``scatter`` (with fewer than three rows only its
     diagonal, a covariance from two points being rank one; with fewer than two nothing).
+
+    ``sequential``: the points are successive iterates, not independent draws. Full Newton steps
+    on fresh renders scatter independently (the glass suite's spheres: lag-1 autocorrelation
+    -0.5 to -0.1 in the IOR), but steps cut to a trust radius walk, and the mean of a walk varies
+    far more than ``cov / n`` says (the suite's distant bowl: autocorrelation 0.72, IOR
+    1.459 +- 0.018 for 1.52). A coordinate whose autocorrelation ``rho`` is positive has its
+    variance of the mean multiplied by ``(1 + rho) / (1 - rho)`` (an AR(1) series' effective
+    sample size), from :data:`_AUTOCORRELATION_POINTS` points on.
     """
     n = np.atleast_2d(points).shape[0]
     spread = monte_carlo_spread(points, scatter)
@@ -80,6 +105,14 @@ def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
     extra = np.atleast_2d(np.cov(spread, rowvar=False)) / n
     if spread.shape[0] < 3:
         extra = np.diag(np.diag(extra))
+    if sequential and spread.shape[0] >= _AUTOCORRELATION_POINTS:
+        rho = lag1_autocorrelation(spread)
+        # The sample autocorrelation of a short series is biased low by about (1 + 3 rho) / m
+        # (Kendall); corrected, a walk's mean is covered 80 % of the time at 95 % intervals
+        # from 12 points with rho 0.7 (65 % uncorrected, 53 % with cov / n alone).
+        rho = np.clip(rho + (1 + 3 * rho) / spread.shape[0], 0.0, _MAX_AUTOCORRELATION)
+        inflation = np.sqrt((1 + rho) / (1 - rho))
+        extra = extra * np.outer(inflation, inflation)
     return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)
 
 

@@ -117,6 +117,11 @@ class Optimiser(abc.ABC):
         holds few (see :func:`abs.fitting.laplace.with_monte_carlo_error`); ``None``: use those."""
         return None
 
+    def sequential_points(self, state: OptimizerState) -> bool:
+        """Whether :meth:`averaged_points` are successive iterates (whose Monte-Carlo error needs
+        their autocorrelation) rather than independent draws."""
+        return False
+
     def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
         """Cross-curvature estimates ``J^T J`` (K, P, P; unconstrained coordinates) the optimiser
         made near its answer, and the points ``z`` (K, P) they were made at, for the Laplace

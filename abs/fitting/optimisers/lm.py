@@ -192,6 +192,11 @@ class LevenbergMarquardt(Optimiser):
         # All but the first quarter, arrived or not.
         return averaged_refinement_points(refinement.points)
 
+    def sequential_points(self, state: OptimizerState) -> bool:
+        """Gauss-Newton iterates are sequential (a clipped step walks); the points of recording
+        pairs are independent."""
+        return not (state.solver or LMState()).pairs
+
     def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
         """The refinement's cross curvatures (K, P, P) and the points ``z`` (K, P) they were
         rendered at, for the steps after the first quarter (those of :meth:`scatter_points`):
