@@ -236,10 +236,10 @@ class PathTracer:
         """
         split = self._split(scene, dispersion)
         with dr.suspend_grad():
-            sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
+            sampler, ray, _, _ = self._camera_rays(camera, spp, seed)
             radiance, _ = self.trace(scene, env, ray, sampler, split, "primal")
             dr.eval(radiance)
-            image = self._film(radiance, camera, spp, pixel, share)
+            image = self._film(radiance, camera, spp)
         weight = adjoint(image).array
         sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
         inv_spp = opaque(mi.Float, 1.0 / spp) * (1.0 if share is None else share)
@@ -394,31 +394,49 @@ class PathTracer:
         return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel, share
 
     def _render_pass(self, scene, env, camera, spp, seed, split, mode):
-        sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
+        sampler, ray, _, _ = self._camera_rays(camera, spp, seed)
         radiance, tangent = self.trace(scene, env, ray, sampler, split, mode)
         # Evaluate all channels in one launch: reducing channel by channel from the unevaluated
         # loop would run the whole path-tracing kernel once per channel.
         dr.eval(radiance, tangent)
-        images = [self._film(radiance, camera, spp, pixel, share)]
-        images.append(self._film(tangent, camera, spp, pixel, share) if tangent is not None else None)
+        images = [self._film(radiance, camera, spp)]
+        images.append(self._film(tangent, camera, spp) if tangent is not None else None)
         return images
 
     @staticmethod
-    def _film(radiance: mi.Color3f, camera: Camera, spp: int, pixel: mi.UInt32,
-              share: mi.Float | None) -> mi.TensorXf:
+    def _film(radiance: mi.Color3f, camera: Camera, spp: int) -> mi.TensorXf:
         """Each pixel's estimate from its lanes (:meth:`_camera_rays`)."""
         w, h = camera.width, camera.height
         inv_spp = opaque(mi.Float, 1.0 / spp)
         flat = dr.zeros(mi.Float, w * h * 3)
-        if share is not None:  # boosted pixels own more lanes: weighted sums by pixel
-            for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
-                dr.scatter_reduce(dr.ReduceOp.Add, flat, value * share * inv_spp, pixel * 3 + c)
-            return mi.TensorXf(flat, (h, w, 3))
-        # Each pixel owns exactly spp consecutive samples: a block sum is the pixel estimate.
-        values = [dr.block_sum(c, spp) * inv_spp for c in (radiance.x, radiance.y, radiance.z)]
         lane = dr.arange(mi.UInt32, w * h)
-        for c in range(3):
-            dr.scatter(flat, values[c], lane * 3 + c)
+        boost = camera.boost
+        # Block sums, not atomic adds: the same samples give the same image, bit for bit. Each
+        # pixel owns spp consecutive lanes, and each boosted pixel spp * (factor - 1) more after
+        # all of those, row by row (see _camera_rays).
+        if boost is not None:
+            base = opaque(mi.UInt32, w * h * spp)
+            per = spp * (boost.factor - 1)
+            columns, width = opaque(mi.UInt32, boost.x1 - boost.x0), opaque(mi.UInt32, w)
+            x0, y0 = opaque(mi.UInt32, boost.x0), opaque(mi.UInt32, boost.y0)
+            inner = dr.arange(mi.UInt32, boost.pixels)
+            target = (y0 + inner // columns) * width + x0 + inner % columns
+            x, y = lane % width, lane // width
+            inside = ((x >= x0) & (x < opaque(mi.UInt32, boost.x1)) & (y >= y0)
+                      & (y < opaque(mi.UInt32, boost.y1)))
+        for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
+            if boost is None:
+                dr.scatter(flat, dr.block_sum(value, spp) * inv_spp, lane * 3 + c)
+                continue
+            ordinary = dr.block_sum(dr.gather(mi.Float, value, dr.arange(mi.UInt32, w * h * spp)), spp)
+            extra = dr.zeros(mi.Float, w * h)
+            dr.scatter(extra, dr.block_sum(dr.gather(mi.Float, value,
+                                                     base + dr.arange(mi.UInt32, boost.pixels * per)),
+                                           per), target)
+            # Inside: spp ordinary and spp (factor - 1) extra samples, averaged together.
+            pixel_value = dr.select(inside, (ordinary + extra) * opaque(mi.Float, 1.0 / boost.factor),
+                                    ordinary) * inv_spp
+            dr.scatter(flat, pixel_value, lane * 3 + c)
         return mi.TensorXf(flat, (h, w, 3))
 
     def _step(self, scene, env: Environment, sampler, ray, beta, active, prev_pdf, prev_delta,
