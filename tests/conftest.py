@@ -41,6 +41,18 @@ def write_mesh(path: Path, mesh) -> None:
     assert isinstance(mesh, trimesh.Trimesh)
 
 
+def sphere_in_view(scene_dir: Path, width: int, height: int):
+    """The small scene compiled, and a camera 0.32 m in front of its glass sphere, slightly above
+    (30° vertical field of view)."""
+    from abs.camera.pinhole import intrinsics_from_fov, look_at
+    from abs.render import Camera, compile_scene
+    from abs.scene import load_scene
+
+    compiled = compile_scene(load_scene(scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
+    return compiled, Camera(intrinsics_from_fov(width, height, np.radians(30)), R, t, width, height)
+
+
 def make_env(path: Path, width: int = 64, height: int = 32) -> None:
     """A dim enclosure with one bright band and a coloured patch (so rotation has a gradient)."""
     from abs.io.images import write_exr

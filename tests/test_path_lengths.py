@@ -19,6 +19,7 @@ from abs.render.integrator import PathTracer
 from abs.render.path_lengths import (JOINT_NODES, PathLengthRecording, bin_light, length_bins,
                                      reweight)
 from abs.scene import load_scene
+from conftest import sphere_in_view
 
 W, H, SPP = 24, 18, 16
 RECORDED = np.array([2.0, 2.0, 2.0])  # 1/m
@@ -26,10 +27,7 @@ RECORDED = np.array([2.0, 2.0, 2.0])  # 1/m
 
 @pytest.fixture(scope="module")
 def scene(small_scene_dir):
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(W, H, np.radians(30)), R, t, W, H)
-    return compiled, camera
+    return sphere_in_view(small_scene_dir, W, H)
 
 
 def _glass(compiled):

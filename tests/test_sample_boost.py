@@ -9,13 +9,12 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from abs.camera.pinhole import intrinsics_from_fov, look_at
 from abs.model import build_model
 from abs.model.counter import RenderCounter
 from abs.model.observations import Observation, boost_where_seen
-from abs.render import Camera, compile_scene
 from abs.render.camera import SampleBoost
 from abs.scene import load_scene
+from conftest import sphere_in_view
 
 W, H, SPP = 24, 18, 8
 BOX = SampleBoost(6, 4, 18, 14, 4)
@@ -23,10 +22,7 @@ BOX = SampleBoost(6, 4, 18, 14, 4)
 
 @pytest.fixture(scope="module")
 def scene(small_scene_dir):
-    compiled = compile_scene(load_scene(small_scene_dir / "scene.toml"))
-    R, t = look_at(np.array([0.0, 0.08, 0.32]), np.array([0.0, 0.05, 0.0]))
-    camera = Camera(intrinsics_from_fov(W, H, np.radians(30)), R, t, W, H)
-    return compiled, camera
+    return sphere_in_view(small_scene_dir, W, H)
 
 
 def _inside() -> np.ndarray:
