@@ -98,6 +98,14 @@ def _leaf(value, tangent):
     return x
 
 
+def _in_boost(boost, pixel: mi.UInt32, width: mi.UInt32) -> mi.Bool:
+    """Whether each flat pixel index (row-major, ``width`` columns) lies in ``boost``'s
+    rectangle."""
+    x, y = pixel % width, pixel // width
+    return ((x >= opaque(mi.UInt32, boost.x0)) & (x < opaque(mi.UInt32, boost.x1))
+            & (y >= opaque(mi.UInt32, boost.y0)) & (y < opaque(mi.UInt32, boost.y1)))
+
+
 @dataclass
 class PathTracer:
     """Render images of a Mitsuba scene lit by an :class:`Environment`.
@@ -374,10 +382,7 @@ class PathTracer:
             columns = opaque(mi.UInt32, boost.x1 - boost.x0)
             pixel = dr.select(extra, (opaque(mi.UInt32, boost.y0) + j // columns) * width
                               + opaque(mi.UInt32, boost.x0) + j % columns, pixel)
-            x, y = pixel % width, pixel // width
-            inside = ((x >= opaque(mi.UInt32, boost.x0)) & (x < opaque(mi.UInt32, boost.x1))
-                      & (y >= opaque(mi.UInt32, boost.y0)) & (y < opaque(mi.UInt32, boost.y1)))
-            share = dr.select(inside, opaque(mi.Float, 1.0 / boost.factor), 1.0)
+            share = dr.select(_in_boost(boost, pixel, width), opaque(mi.Float, 1.0 / boost.factor), 1.0)
         px = mi.Float(pixel % width)
         py = mi.Float(pixel // width)
         offset = sampler.next_2d()
@@ -421,9 +426,7 @@ class PathTracer:
             x0, y0 = opaque(mi.UInt32, boost.x0), opaque(mi.UInt32, boost.y0)
             inner = dr.arange(mi.UInt32, boost.pixels)
             target = (y0 + inner // columns) * width + x0 + inner % columns
-            x, y = lane % width, lane // width
-            inside = ((x >= x0) & (x < opaque(mi.UInt32, boost.x1)) & (y >= y0)
-                      & (y < opaque(mi.UInt32, boost.y1)))
+            inside = _in_boost(boost, lane, width)
         for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
             if boost is None:
                 dr.scatter(flat, dr.block_sum(value, spp) * inv_spp, lane * 3 + c)
