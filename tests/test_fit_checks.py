@@ -113,3 +113,4 @@ def test_standard_errors_without_their_monte_carlo_part_are_named():
              if "Monte-Carlo error" in c]
     assert len(short) == 1 and "had 1" in short[0] and "--refinement-steps" in short[0]
     assert run_checks(_summary(monte_carlo_points=3, method="lm"), BOUNDS, KINDS) == []
+    assert run_checks(_summary(monte_carlo_points=0, method="adam"), BOUNDS, KINDS) == []

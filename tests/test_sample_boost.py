@@ -96,6 +96,8 @@ def test_the_boost_covers_where_the_glass_is_seen_and_its_samples_count(scene, s
     assert counter.samples == (W * H + 3 * boost.pixels) * SPP
     with pytest.raises(ValueError, match="outside"):
         dataclasses.replace(camera, boost=SampleBoost(0, 0, W + 1, H, 2))
+    with pytest.raises(ValueError, match="factor >= 2"):
+        SampleBoost(0, 0, 4, 4, 1)
 
 
 def test_a_model_with_a_glass_boost_boosts_its_problems(small_scene_dir, tmp_path):

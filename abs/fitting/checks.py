@@ -162,13 +162,13 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
                     f"({plausible[0]:g} to {plausible[1]:g}): the fit most likely found a wrong "
                     "basin. Start closer (abs glass rgb gives physical values), tie the channels, "
                     "or fit at a coarser resolution first.")
-    if summary.get("monte_carlo_points", 2) < 2:
+    # Levenberg-Marquardt's refinement measures it; Adam's average of iterates does not (yet).
+    if summary.get("method") == "lm" and summary.get("monte_carlo_points", 2) < 2:
         checks.append(
             "The standard errors count the photographs' noise only: the renders' Monte-Carlo error "
             "of the values, measured from the scatter of the refinement's points, needs at least "
-            f"two points and this fit ({summary.get('method', '?')}) had "
-            f"{summary['monte_carlo_points']}, so the errors may be far too small. Fit with --method lm and "
-            "--refinement-steps 4 or more.")
+            f"two points and this fit had {summary['monte_carlo_points']}, so the errors may be "
+            "far too small. Fit with --refinement-steps 4 or more.")
     corr = summary.get("correlation") or {}
     labels, matrix = corr.get("names", []), corr.get("matrix", [])
     for i in range(len(labels)):

@@ -84,7 +84,7 @@ def boost_where_seen(observation: Observation, bounds, factor: int) -> Observati
     if factor <= 1 or not bounds:
         return observation
     corners = np.array([c for lo, hi in bounds for c in itertools.product(*zip(lo, hi))], float)
-    in_camera = corners @ camera.R.T + camera.t
+    in_camera = corners @ camera.R.T + np.ravel(camera.t)
     if np.any(in_camera[:, 2] <= 0):
         return observation
     uv = in_camera @ camera.K.T

@@ -36,8 +36,8 @@ class SampleBoost:
     factor: int
 
     def __post_init__(self):
-        if not (0 <= self.x0 < self.x1 and 0 <= self.y0 < self.y1) or self.factor < 1:
-            raise ValueError(f"a sample boost needs a non-empty rectangle and factor >= 1, not {self}")
+        if not (0 <= self.x0 < self.x1 and 0 <= self.y0 < self.y1) or self.factor < 2:
+            raise ValueError(f"a sample boost needs a non-empty rectangle and factor >= 2, not {self}")
 
     @property
     def pixels(self) -> int:
