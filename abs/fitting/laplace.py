@@ -93,8 +93,8 @@ def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
     ``sequential``: the points are successive iterates, not independent draws. Full Newton steps
     on fresh renders scatter independently (the glass suite's spheres: lag-1 autocorrelation
     -0.5 to -0.1 in the IOR), but steps cut to a trust radius walk, and the mean of a walk varies
-    far more than ``cov / n`` says (the suite's distant bowl: autocorrelation 0.72, IOR
-    1.459 +- 0.018 for 1.52). A coordinate whose autocorrelation ``rho`` is positive has its
+    far more than ``cov / n`` says (the suite's distant bowl before this correction:
+    autocorrelation 0.72, IOR 1.459 +- 0.018 for 1.52; with it, in the next run, 1.474 +- 0.11). A coordinate whose autocorrelation ``rho`` is positive has its
     variance of the mean multiplied by ``(1 + rho) / (1 - rho)`` (an AR(1) series' effective
     sample size), from :data:`_AUTOCORRELATION_POINTS` points on.
     """
