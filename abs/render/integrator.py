@@ -98,6 +98,14 @@ def _leaf(value, tangent):
     return x
 
 
+def _boosted_pixel(boost, index: mi.UInt32, width: mi.UInt32) -> mi.UInt32:
+    """The flat pixel index (row-major, ``width`` columns) of the ``index``-th pixel of
+    ``boost``'s rectangle, row by row: where its extra lanes go."""
+    columns = opaque(mi.UInt32, boost.x1 - boost.x0)
+    return ((opaque(mi.UInt32, boost.y0) + index // columns) * width
+            + opaque(mi.UInt32, boost.x0) + index % columns)
+
+
 def _in_boost(boost, pixel: mi.UInt32, width: mi.UInt32) -> mi.Bool:
     """Whether each flat pixel index (row-major, ``width`` columns) lies in ``boost``'s
     rectangle."""
@@ -379,9 +387,7 @@ class PathTracer:
             base = opaque(mi.UInt32, w * h * spp)
             extra = lane >= base
             j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, spp * (boost.factor - 1))
-            columns = opaque(mi.UInt32, boost.x1 - boost.x0)
-            pixel = dr.select(extra, (opaque(mi.UInt32, boost.y0) + j // columns) * width
-                              + opaque(mi.UInt32, boost.x0) + j % columns, pixel)
+            pixel = dr.select(extra, _boosted_pixel(boost, j, width), pixel)
             share = dr.select(_in_boost(boost, pixel, width), opaque(mi.Float, 1.0 / boost.factor), 1.0)
         px = mi.Float(pixel % width)
         py = mi.Float(pixel // width)
@@ -422,10 +428,8 @@ class PathTracer:
         if boost is not None:
             base = opaque(mi.UInt32, w * h * spp)
             per = spp * (boost.factor - 1)
-            columns, width = opaque(mi.UInt32, boost.x1 - boost.x0), opaque(mi.UInt32, w)
-            x0, y0 = opaque(mi.UInt32, boost.x0), opaque(mi.UInt32, boost.y0)
-            inner = dr.arange(mi.UInt32, boost.pixels)
-            target = (y0 + inner // columns) * width + x0 + inner % columns
+            width = opaque(mi.UInt32, w)
+            target = _boosted_pixel(boost, dr.arange(mi.UInt32, boost.pixels), width)
             inside = _in_boost(boost, lane, width)
         for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
             if boost is None:
