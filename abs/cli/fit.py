@@ -53,6 +53,10 @@ def add_parser(sub) -> None:
     p.add_argument("--glass-spp-factor", type=int, default=1, metavar="F",
                    help="F times the samples per pixel where glass is seen (its refractions are the "
                         "images' noisiest part and measure its IOR); default 1")
+    p.add_argument("--difference-steps", default=None, metavar="auto|NAME=H,...",
+                   help="central-difference steps of parameters that take their derivative so (an "
+                        "IOR): 'auto' chooses each from a pilot of its Jacobian column; "
+                        "glass.ior=0.04 gives it; default: the parameter's own")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -69,6 +73,29 @@ def _initial(items: list[str]) -> dict:
         except ValueError:
             raise InputError(None, "--init", f"{item!r}: expected NAME=V[,V...] with numbers") from None
     return out
+
+
+def _difference_steps(text: str | None):
+    import math
+
+    from abs.errors import InputError
+
+    if text is None:
+        return ()
+    if text.strip() == "auto":
+        return "auto"
+    out = []
+    for item in text.split(","):
+        name, _, value = item.partition("=")
+        try:
+            step = float(value)
+        except ValueError:
+            step = float("nan")
+        if not name.strip() or not math.isfinite(step) or step <= 0.0:
+            raise InputError(None, "--difference-steps", f"{item!r}: expected auto or NAME=STEP "
+                                                         "with a positive step")
+        out.append((name.strip(), step))
+    return tuple(out)
 
 
 def run(args) -> int:
@@ -89,13 +116,14 @@ def run(args) -> int:
         starts = parse_starts(args.starts)
     except ValueError as exc:
         raise InputError(None, "--starts", str(exc)) from None
+    steps = _difference_steps(args.difference_steps)
     settings = FitSettings(
         method=args.method, spp=args.spp, downsample=args.downsample, clamp=args.clamp,
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
         seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts,
-        glass_spp_factor=args.glass_spp_factor)
+        glass_spp_factor=args.glass_spp_factor, difference_steps=steps)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

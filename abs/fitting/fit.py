@@ -12,7 +12,7 @@ report) and progress display are the caller's: pass ``on_iteration`` to observe 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -23,10 +23,11 @@ from abs.fitting.objective import Objective
 from abs.fitting.optimisers import OptimizerState, get
 from abs.fitting.optimisers.lm import pair_seeds
 from abs.fitting.scan import channel_curves, default_grid, parabola_minimum
-from abs.fitting.settings import FitSettings
+from abs.fitting.settings import FitSettings, explicit_steps
 from abs.fitting.starts import StartChoice, choose_start
 from abs.metrics import ssim
 from abs.model import ParameterVector, build_model, estimate_image_noise, render_views
+from abs.model.difference_steps import DifferenceStep, choose_difference_steps
 
 __all__ = ["fit", "FitResult", "ViewRenderings"]
 
@@ -66,6 +67,7 @@ class FitResult:
     limited: dict[str, np.ndarray] | None = None
     starts: StartChoice | None = None
     monte_carlo_points: int = 0
+    difference_steps: dict[str, DifferenceStep] | None = None
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -101,7 +103,20 @@ class FitResult:
             "checks": list(self.checks),
             **({"scan": self.scan} if self.scan else {}),
             **({"starts": self.starts.to_dict()} if self.starts is not None else {}),
+            **({"difference_steps": {n: d.to_dict() for n, d in self.difference_steps.items()}}
+               if self.difference_steps else {}),
         }
+
+
+def _choose_steps(scene, capture, parameters, settings: FitSettings, initial):
+    """The central-difference steps chosen by a pilot at the start
+    (:func:`~abs.model.difference_steps.choose_difference_steps`, on the fit's own comparison),
+    and what the pilot rendered: ``(renders, samples)``."""
+    model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight,
+                        settings.glass_spp_factor)
+    problem = model.problem("train", settings.downsample, settings.clamp)
+    steps = choose_difference_steps(problem, model.vector.initial, settings.spp, settings.seed)
+    return steps, (model.counter.renders, model.counter.samples)
 
 
 def _refinement_curvatures(found, objective: Objective) -> list[np.ndarray]:
@@ -192,6 +207,11 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
+    steps, pilot = None, (0, 0)
+    if settings.difference_steps == "auto":
+        # Before the starts, whose short fits then use the chosen steps as given.
+        steps, pilot = _choose_steps(scene, capture, parameters, settings, initial)
+        settings = replace(settings, difference_steps=tuple((n, s.step) for n, s in steps.items()))
     starts = None
     if resume is not None and resume.start is not None:
         starts = StartChoice.from_dict(resume.start)
@@ -200,7 +220,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     if starts is not None:
         initial = {**(initial or {}), **starts.values}
     model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight,
-                        settings.glass_spp_factor)
+                        settings.glass_spp_factor, explicit_steps(settings))
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
@@ -285,11 +305,12 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     renders, samples = counter.renders, counter.samples
     if starts is not None and resume is None:
         renders, samples = renders + starts.renders, samples + starts.samples_rendered
+    renders, samples = renders + pilot[0], samples + pilot[1]
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
                        metrics, method, state.iteration, renders, samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
                        scan=scans, limited=limited, starts=starts,
-                       monte_carlo_points=monte_carlo_points)
+                       monte_carlo_points=monte_carlo_points, difference_steps=steps)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FitSettings", "schedule_value", "parse_schedule", "parse_starts"]
+__all__ = ["FitSettings", "schedule_value", "parse_schedule", "parse_starts", "explicit_steps"]
 
 # Levenberg-Marquardt's Jacobian costs one forward-mode pass per scalar; beyond this many scalars
 # Adam on reverse-mode gradients is cheaper.
@@ -86,6 +86,11 @@ class FitSettings:
         Pixels where glass is seen (the rectangle around its objects' projected bounding boxes)
         take this many times ``spp``: their refractions are the noisiest part of the images
         and what an IOR is measured by (:class:`abs.render.camera.SampleBoost`). 1: none.
+    difference_steps : "auto" or tuple of (str, float)
+        The central-difference steps of parameters that take their derivative so (an IOR, in
+        its units): ``"auto"`` chooses each from a pilot of its Jacobian column at the start
+        (:mod:`abs.model.difference_steps`; recorded in ``fit.json``); pairs
+        ``(("glass.ior", 0.04),)`` give them; empty: each parameter's own.
     """
 
     method: str = "auto"
@@ -105,6 +110,7 @@ class FitSettings:
     reweight: bool = True
     starts: tuple[tuple[str, tuple[float, ...]], ...] = ()
     glass_spp_factor: int = 1
+    difference_steps: str | tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self):
         from abs.fitting.optimisers import names
@@ -119,6 +125,16 @@ class FitSettings:
             if (len(entry) != 2 or not isinstance(entry[0], str) or not len(entry[1])
                     or not all(np.isfinite(float(v)) for v in entry[1])):
                 raise ValueError(f"starts: expected (parameter name, (value, ...)), got {entry!r}")
+        if isinstance(self.difference_steps, str):
+            if self.difference_steps != "auto":
+                raise ValueError(f"difference_steps must be 'auto' or (name, step) pairs, not "
+                                 f"{self.difference_steps!r}")
+        else:
+            for entry in self.difference_steps:
+                if (len(entry) != 2 or not isinstance(entry[0], str)
+                        or not (np.isfinite(float(entry[1])) and float(entry[1]) > 0.0)):
+                    raise ValueError(f"difference_steps: expected (parameter name, step > 0), "
+                                     f"got {entry!r}")
 
     def resolved_method(self, n_scalars: int) -> str:
         if self.method != "auto":
@@ -140,3 +156,11 @@ def parse_starts(items) -> tuple[tuple[str, tuple[float, ...]], ...]:
             raise ValueError(f"--starts {item!r}: expected NAME=V1,V2,... (numbers)")
         out.append((name.strip(), numbers))
     return tuple(out)
+
+
+def explicit_steps(settings: FitSettings) -> dict[str, float] | None:
+    """``settings.difference_steps`` as a mapping for :func:`abs.model.build_model` (``None``
+    for ``"auto"``, which :func:`abs.fitting.fit` resolves before building its model)."""
+    if isinstance(settings.difference_steps, str):
+        return None
+    return {name: float(step) for name, step in settings.difference_steps}

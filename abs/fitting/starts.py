@@ -28,6 +28,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from abs.fitting.settings import explicit_steps
 from abs.model import build_model
 
 __all__ = ["StartChoice", "choose_start", "short_settings", "SCORE_PAIRS", "SCORE_SPP_FACTOR",
@@ -125,7 +126,7 @@ def choose_start(scene, capture, names, settings, initial=None, run_fit=None) ->
     spp = short.spp * SCORE_SPP_FACTOR
     # One model scores every end (a fresh compile per end would cost more than its renders).
     model = build_model(scene, capture, names, initial, settings.tie, settings.reweight,
-                        settings.glass_spp_factor)
+                        settings.glass_spp_factor, explicit_steps(settings))
     problem, vector = model.problem("train", settings.downsample, settings.clamp), model.vector
     unknown = [n for n, _ in settings.starts if n not in vector.names]
     if unknown:

@@ -104,7 +104,8 @@ class ForwardModel:
 
 def build_model(scene, capture, parameters: Sequence[str] | None = None,
                 initial: Mapping[str, object] | None = None, tied: Sequence[str] = (),
-                reweight: bool = True, glass_spp_factor: int = 1) -> ForwardModel:
+                reweight: bool = True, glass_spp_factor: int = 1,
+                difference_steps: Mapping[str, float] | None = None) -> ForwardModel:
     """Load, compile and check a scene and capture, and lay out the parameters that vary.
 
     Parameters
@@ -128,6 +129,9 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
         as the seeds' scan does).
     glass_spp_factor : int
         More samples where glass is seen (:class:`ForwardModel`).
+    difference_steps : mapping, optional
+        Central-difference steps by parameter name (an IOR's; its units) instead of the
+        parameters' own (:mod:`abs.model.difference_steps` chooses them).
 
     Returns
     -------
@@ -152,6 +156,14 @@ def build_model(scene, capture, parameters: Sequence[str] | None = None,
                                        tuple(tied))
     except ValueError as exc:
         raise InputError(None, "tie", str(exc)) from None
+    for name, step in (difference_steps or {}).items():
+        if name not in names:
+            raise InputError(None, "difference_steps", f"{name!r} is not among the fitted "
+                                                       f"parameters {names}")
+        try:
+            compiled.set_difference_step(name, float(step))
+        except ValueError as exc:
+            raise InputError(None, f"difference_steps.{name}", str(exc)) from None
     if int(glass_spp_factor) < 1:
         raise InputError(None, "glass_spp_factor", f"must be >= 1, not {glass_spp_factor}")
     return ForwardModel(scene, compiled, capture, vector, reweight=reweight,

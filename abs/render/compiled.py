@@ -15,6 +15,7 @@ renders then differentiate with respect to it::
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import drjit as dr
 import mitsuba as mi
@@ -261,6 +262,16 @@ class CompiledScene:
         self.params[f"{sid}.vertex_positions"] = positions
         if normals is not None:
             self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ self._normals(obj))
+
+    def set_difference_step(self, name: str, step: float) -> None:
+        """Take ``name``'s derivative by central differences of ``step`` (its units) from now on
+        (:func:`abs.model.difference_steps.choose_difference_steps` chooses one per fit)."""
+        spec = self._spec(name)
+        if spec.difference_step is None:
+            raise ValueError(f"{name} takes its derivative by forward mode, not by differences")
+        if not (np.isfinite(step) and step > 0.0):
+            raise ValueError(f"{name}: a difference step must be a positive number, not {step}")
+        self.specs[name] = replace(spec, difference_step=float(step))
 
     def _spec(self, name: str) -> Parameter:
         if name not in self.specs:
