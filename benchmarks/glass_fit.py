@@ -158,7 +158,7 @@ def run_case(case: Case, work: Path, args) -> dict:
     return {"case": case.name, "mesh": case.mesh, "parameters": rows, "checks": summary["checks"],
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
-            "starts": summary.get("starts"),
+            "starts": summary.get("starts"), "difference_steps": summary.get("difference_steps"),
             "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
                       for h in result.history],
             "settings": {**shape, "fit": dataclasses.asdict(settings)}}
