@@ -96,3 +96,23 @@ def test_bad_difference_steps_are_named(small_scene_dir, capture):
     with pytest.raises(InputError, match="forward mode"):
         build_model(small_scene_dir / "scene.toml", capture, ["glass.absorption"],
                     difference_steps={"glass.absorption": 0.04})
+
+
+def test_command_line_difference_steps():
+    from abs.cli.fit import _difference_steps
+
+    assert _difference_steps(None) == ()
+    assert _difference_steps("auto") == "auto"
+    assert _difference_steps("glass.ior=0.04") == (("glass.ior", 0.04),)
+    for bad in ("glass.ior", "glass.ior=-1", "=0.02", "glass.ior=x"):
+        with pytest.raises(InputError, match="--difference-steps"):
+            _difference_steps(bad)
+
+
+def test_short_fits_take_the_parameters_own_steps_or_the_given_ones():
+    """The pilot runs at the full fit's start; the starts' short fits do not run their own."""
+    from abs.fitting.starts import short_settings
+
+    assert short_settings(FitSettings(difference_steps="auto")).difference_steps == ()
+    given = (("glass.ior", 0.04),)
+    assert short_settings(FitSettings(difference_steps=given)).difference_steps == given

@@ -12,7 +12,7 @@ report) and progress display are the caller's: pass ``on_iteration`` to observe 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -108,17 +108,6 @@ class FitResult:
         }
 
 
-def _choose_steps(scene, capture, parameters, settings: FitSettings, initial):
-    """The central-difference steps chosen by a pilot at the start
-    (:func:`~abs.model.difference_steps.choose_difference_steps`, on the fit's own comparison),
-    and what the pilot rendered: ``(renders, samples)``."""
-    model = build_model(scene, capture, parameters, initial, settings.tie, settings.reweight,
-                        settings.glass_spp_factor)
-    problem = model.problem("train", settings.downsample, settings.clamp)
-    steps = choose_difference_steps(problem, model.vector.initial, settings.spp, settings.seed)
-    return steps, (model.counter.renders, model.counter.samples)
-
-
 def _refinement_curvatures(found, objective: Objective) -> list[np.ndarray]:
     """An optimiser's cross curvatures of the weighted residuals in ``z``
     (:meth:`~abs.fitting.optimisers.Optimiser.curvatures`) in :func:`laplace`'s units: ``J^T J``
@@ -207,11 +196,6 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     FitResult
     """
     t0 = time.perf_counter()
-    steps, pilot = None, (0, 0)
-    if settings.difference_steps == "auto":
-        # Before the starts, whose short fits then use the chosen steps as given.
-        steps, pilot = _choose_steps(scene, capture, parameters, settings, initial)
-        settings = replace(settings, difference_steps=tuple((n, s.step) for n, s in steps.items()))
     starts = None
     if resume is not None and resume.start is not None:
         starts = StartChoice.from_dict(resume.start)
@@ -223,6 +207,13 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                         settings.glass_spp_factor, explicit_steps(settings))
     scene, compiled, vector, names, counter = (model.scene, model.compiled, model.vector,
                                                model.names, model.counter)
+    steps = None
+    if settings.difference_steps == "auto":
+        # At the full fit's start (after the starts, whose short fits take the parameters' own
+        # steps): what a step keeps of the signal depends on where it is measured (a sphere's
+        # image is far less linear in its IOR near 1.62 than at 1.5).
+        steps = choose_difference_steps(model.problem("train", settings.downsample, settings.clamp),
+                                        vector.initial, settings.spp, settings.seed)
     priors = {n: p for n, p in scene.fit_priors.items() if n in names}
     method = settings.resolved_method(vector.size)
     optimiser = get(method)
@@ -305,7 +296,6 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     renders, samples = counter.renders, counter.samples
     if starts is not None and resume is None:
         renders, samples = renders + starts.renders, samples + starts.samples_rendered
-    renders, samples = renders + pilot[0], samples + pilot[1]
     result = FitResult(vector, vector.split(theta), vector.split(vector.initial), uncertainty,
                        metrics, method, state.iteration, renders, samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,

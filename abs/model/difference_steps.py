@@ -20,9 +20,9 @@ it, from :data:`PILOT_SEEDS` independent seeds, and keeps the step with the leas
 signal among those that keep at least :data:`SIGNAL_KEPT` of the largest signal: a smaller
 signal is the derivative averaged over a range where the image is far from linear (its
 curvature would understate what the photographs measure, and inflate the standard errors).
-What matters for the estimate is unchanged: the fixed point of ``J^T r = 0`` is where the
-expected residuals vanish whatever ``J`` is, so a smoother ``J`` steers the fit without moving
-where it stops.
+Where the pilot renders matters: at IOR 1.5 the spheres' signal kept two thirds at 0.08, and
+a sphere of IOR 1.62 fitted with that step ended at 1.6115 +- 0.0036 (1.6185 +- 0.0014 with
+0.02). A fit runs it at its own start, after the starts (:func:`abs.fitting.fit`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ PILOT_SEEDS = 8
 #: A step must keep this share of the largest signal energy among those tried.
 SIGNAL_KEPT = 0.5
 #: Seeds of the pilot renders, clear of those a fit uses.
-_PILOT_SEED = 30_000
+_PILOT_SEED = 50_000_000
 
 
 @dataclass(frozen=True)
