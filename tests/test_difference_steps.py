@@ -77,6 +77,9 @@ def test_auto_steps_are_chosen_once_recorded_and_used(small_scene_dir, capture):
     summary = result.summary()["difference_steps"]["glass.ior"]
     assert summary["step"] in [t["step"] for t in summary["tried"]]
     assert len(summary["tried"]) == len(MULTIPLES)
+    from abs.report.text import summary_lines
+
+    assert any(line.startswith("difference step of glass.ior: ") for line in summary_lines(result.summary()))
     # Given steps render no pilot.
     given = FitSettings(spp=4, max_iterations=2, refinement_steps=0, tie=("glass.ior",),
                         difference_steps=(("glass.ior", summary["step"]),))

@@ -10,8 +10,8 @@ __all__ = ["summary_lines"]
 
 
 def summary_lines(summary: Mapping) -> list[str]:
-    """Where several starts went (when there were any), ``name = [value ± stderr, ...] unit`` per
-    parameter, then RMSE before -> after."""
+    """Where several starts went (when there were any), the difference steps a pilot chose (when
+    one ran), ``name = [value ± stderr, ...] unit`` per parameter, then RMSE before -> after."""
     lines = []
     starts = summary.get("starts")
     if starts:
@@ -20,6 +20,9 @@ def summary_lines(summary: Mapping) -> list[str]:
             end = ", ".join(f"{np.ravel(tried['end'][n])[0]:.4g}" for n in tried["start"])
             chosen = "  <- chosen" if k == starts["chosen"] else ""
             lines.append(f"start {start} -> {end} (objective {tried['objective']:.4g}){chosen}")
+    for name, chosen in (summary.get("difference_steps") or {}).items():
+        tried = ", ".join(f"{t['step']:.3g}" for t in chosen["tried"])
+        lines.append(f"difference step of {name}: {chosen['step']:.3g} (pilot of {tried})")
     for name, entry in summary["parameters"].items():
         values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g} (unconstrained)"
                            for v, s in zip(entry["value"], entry["stderr"]))
