@@ -13,7 +13,7 @@ image is near linear over that range. Which ``h`` is best depends on the scene:
   checkerboard's edges move by pixels over that range; the parameter's noise per render
   (``noise / signal^2``) grows 1.5 to 2.7x;
 - a thin-walled bowl framed before it: the signal stays (534, 486, 388 at 0.02, 0.04, 0.08)
-  while the noise falls 2.7x per doubling; ``noise / signal^2`` falls 3.3x from 0.02 to 0.08.
+  while the noise falls 2.3-2.7x per doubling; ``noise / signal^2`` falls 3.3x from 0.02 to 0.08.
 
 :func:`choose_difference_steps` renders the column at the parameter's own step and at 2x and 4x
 it, from :data:`PILOT_SEEDS` independent seeds, and keeps the step with the least noise per
@@ -65,11 +65,8 @@ class DifferenceStep:
     tried: list
 
     def to_dict(self) -> dict:
+        """``fit.json``'s entry for this parameter under ``difference_steps``."""
         return {"step": self.step, "tried": self.tried}
-
-    @classmethod
-    def from_dict(cls, name: str, d: dict) -> "DifferenceStep":
-        return cls(name, float(d["step"]), list(d.get("tried", [])))
 
 
 def column_signal_and_noise(columns: np.ndarray) -> tuple[float, float]:
