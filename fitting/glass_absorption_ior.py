@@ -24,8 +24,8 @@ Why these settings:
 - **The IOR's difference step chosen per scene** (``difference_steps="auto"``): its derivative
   is a central difference whose noise falls as the step grows, while its signal holds only as
   long as the image is near linear over the step; a pilot of the column at 1, 2 and 4 times the
-  IOR's own step (0.02) keeps the least noisy step that keeps the signal (spheres: 0.02; a
-  thin-walled bowl: 0.08, :mod:`abs.model.difference_steps`).
+  IOR's own step (0.02) keeps the least noisy step that keeps the signal (the glass suite's
+  spheres: 0.02 to 0.08; a thin-walled bowl: 0.08; :mod:`abs.model.difference_steps`).
 - **The environment's scale with them**: a brighter environment and a clearer glass trade off
   on the glass's pixels; every other pixel pins the scale.
 - **Several starts** (``FitSettings.starts``, :mod:`abs.fitting.starts`): the IOR's objective
