@@ -102,14 +102,14 @@ def test_bad_difference_steps_are_named(small_scene_dir, capture):
 
 
 def test_command_line_difference_steps():
-    from abs.cli.fit import _difference_steps
+    from abs.fitting.settings import parse_difference_steps
 
-    assert _difference_steps(None) == ()
-    assert _difference_steps("auto") == "auto"
-    assert _difference_steps("glass.ior=0.04") == (("glass.ior", 0.04),)
+    assert parse_difference_steps(None) == ()
+    assert parse_difference_steps("auto") == "auto"
+    assert parse_difference_steps("glass.ior=0.04") == (("glass.ior", 0.04),)
     for bad in ("glass.ior", "glass.ior=-1", "=0.02", "glass.ior=x"):
-        with pytest.raises(InputError, match="--difference-steps"):
-            _difference_steps(bad)
+        with pytest.raises(ValueError, match="--difference-steps"):
+            parse_difference_steps(bad)
 
 
 def test_short_fits_take_the_parameters_own_steps_or_the_given_ones():

@@ -75,36 +75,13 @@ def _initial(items: list[str]) -> dict:
     return out
 
 
-def _difference_steps(text: str | None):
-    import math
-
-    from abs.errors import InputError
-
-    if text is None:
-        return ()
-    if text.strip() == "auto":
-        return "auto"
-    out = []
-    for item in text.split(","):
-        name, _, value = item.partition("=")
-        try:
-            step = float(value)
-        except ValueError:
-            step = float("nan")
-        if not name.strip() or not math.isfinite(step) or step <= 0.0:
-            raise InputError(None, "--difference-steps", f"{item!r}: expected auto or NAME=STEP "
-                                                         "with a positive step")
-        out.append((name.strip(), step))
-    return tuple(out)
-
-
 def run(args) -> int:
     import numpy as np
     from tqdm import tqdm
 
     from abs.fitting import FitSettings, OptimizerState, fit
     from abs.errors import InputError
-    from abs.fitting.settings import parse_schedule, parse_starts
+    from abs.fitting.settings import parse_difference_steps, parse_schedule, parse_starts
     from abs.report.text import summary_lines
     from abs.runs.files import load_checkpoint, save_checkpoint
     from abs.runs.fit_folder import FIT_FILE, write_fit_folder
@@ -116,7 +93,10 @@ def run(args) -> int:
         starts = parse_starts(args.starts)
     except ValueError as exc:
         raise InputError(None, "--starts", str(exc)) from None
-    steps = _difference_steps(args.difference_steps)
+    try:
+        steps = parse_difference_steps(args.difference_steps)
+    except ValueError as exc:
+        raise InputError(None, "--difference-steps", str(exc)) from None
     settings = FitSettings(
         method=args.method, spp=args.spp, downsample=args.downsample, clamp=args.clamp,
         max_iterations=args.max_iterations, refinement_steps=args.refinement_steps,

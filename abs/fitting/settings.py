@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FitSettings", "schedule_value", "parse_schedule", "parse_starts", "explicit_steps"]
+__all__ = ["FitSettings", "schedule_value", "parse_schedule", "parse_starts",
+           "parse_difference_steps", "explicit_steps"]
 
 # Levenberg-Marquardt's Jacobian costs one forward-mode pass per scalar; beyond this many scalars
 # Adam on reverse-mode gradients is cheaper.
@@ -158,9 +159,31 @@ def parse_starts(items) -> tuple[tuple[str, tuple[float, ...]], ...]:
     return tuple(out)
 
 
+def parse_difference_steps(text: str | None):
+    """``"auto"`` -> ``"auto"``, ``"glass.ior=0.04"`` -> ``(("glass.ior", 0.04),)``, ``None`` ->
+    ``()`` (the command line's ``--difference-steps``)."""
+    if text is None:
+        return ()
+    if text.strip() == "auto":
+        return "auto"
+    out = []
+    for item in text.split(","):
+        name, _, value = item.partition("=")
+        try:
+            step = float(value)
+        except ValueError:
+            step = float("nan")
+        if not name.strip() or not np.isfinite(step) or step <= 0.0:
+            raise ValueError(f"--difference-steps {item!r}: expected auto or NAME=STEP with a "
+                             "positive step")
+        out.append((name.strip(), step))
+    return tuple(out)
+
+
 def explicit_steps(settings: FitSettings) -> dict[str, float] | None:
     """``settings.difference_steps`` as a mapping for :func:`abs.model.build_model` (``None``
-    for ``"auto"``, which :func:`abs.fitting.fit` resolves before building its model)."""
+    for ``"auto"``: the model keeps the parameters' own steps until :func:`abs.fitting.fit`'s
+    pilot sets its choice)."""
     if isinstance(settings.difference_steps, str):
         return None
     return {name: float(step) for name, step in settings.difference_steps}
