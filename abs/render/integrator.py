@@ -426,20 +426,19 @@ class PathTracer:
         # pixel owns spp consecutive lanes, and each boosted pixel spp * (factor - 1) more after
         # all of those, row by row (see _camera_rays).
         if boost is not None:
-            base = opaque(mi.UInt32, w * h * spp)
             per = spp * (boost.factor - 1)
             width = opaque(mi.UInt32, w)
             target = _boosted_pixel(boost, dr.arange(mi.UInt32, boost.pixels), width)
             inside = _in_boost(boost, lane, width)
+            ordinary_lanes = dr.arange(mi.UInt32, w * h * spp)
+            extra_lanes = opaque(mi.UInt32, w * h * spp) + dr.arange(mi.UInt32, boost.pixels * per)
         for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
             if boost is None:
                 dr.scatter(flat, dr.block_sum(value, spp) * inv_spp, lane * 3 + c)
                 continue
-            ordinary = dr.block_sum(dr.gather(mi.Float, value, dr.arange(mi.UInt32, w * h * spp)), spp)
+            ordinary = dr.block_sum(dr.gather(mi.Float, value, ordinary_lanes), spp)
             extra = dr.zeros(mi.Float, w * h)
-            dr.scatter(extra, dr.block_sum(dr.gather(mi.Float, value,
-                                                     base + dr.arange(mi.UInt32, boost.pixels * per)),
-                                           per), target)
+            dr.scatter(extra, dr.block_sum(dr.gather(mi.Float, value, extra_lanes), per), target)
             # Inside: spp ordinary and spp (factor - 1) extra samples, averaged together.
             pixel_value = dr.select(inside, (ordinary + extra) * opaque(mi.Float, 1.0 / boost.factor),
                                     ordinary) * inv_spp
