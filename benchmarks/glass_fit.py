@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import sys
 import time
@@ -122,7 +123,10 @@ def run_case(case: Case, work: Path, args) -> dict:
                                                    case.env_scale))
     (folder / "scene.toml").write_text(_scene_text(case.mesh, [case.start_ior] * 3, (1.0, 1.0, 1.0),
                                                    1.0))
-    shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp}
+    # The mesh's bytes key the cached capture too: an edited asset (the bowl lifted off the cloth)
+    # renders a new one.
+    shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp,
+             "mesh_sha256": hashlib.sha256((DEFAULT / case.mesh).read_bytes()).hexdigest()}
     made = folder / "capture" / "benchmark.json"
     if not made.exists() or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}:
         simulate_capture(load_scene(folder / "truth.toml"), folder / "capture", n_cameras=args.views,
@@ -168,10 +172,12 @@ def _settings(text: str):
     """``--settings`` JSON as :class:`abs.FitSettings`, or the glass recipe's when it is empty."""
     from abs.fitting import FitSettings
 
+    def frozen(value):  # JSON's lists as the nested tuples FitSettings holds (schedules, starts)
+        return tuple(map(frozen, value)) if isinstance(value, list) else value
+
     given = json.loads(text)
     if given:
-        return FitSettings(**{k: tuple(map(tuple, v)) if k.endswith("schedule") else
-                              tuple(v) if isinstance(v, list) else v for k, v in given.items()})
+        return FitSettings(**{k: frozen(v) for k, v in given.items()})
     sys.path.insert(0, str(ROOT / "fitting"))
     from glass_absorption_ior import settings
 

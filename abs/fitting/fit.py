@@ -28,6 +28,7 @@ from abs.fitting.starts import StartChoice, choose_start
 from abs.metrics import ssim
 from abs.model import ParameterVector, build_model, estimate_image_noise, render_views
 from abs.model.difference_steps import DifferenceStep, choose_difference_steps
+from abs.render.contacts import coincident_surfaces
 
 __all__ = ["fit", "FitResult", "ViewRenderings"]
 
@@ -303,6 +304,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                        monte_carlo_points=monte_carlo_points, difference_steps=steps)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
-    result.checks = run_checks(result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper)
-                                                  for n in names}, kinds, vector.split(vector.step))
+    # The scene's own geometry first: coincident surfaces make the renders themselves ambiguous.
+    result.checks = [c.message() for c in coincident_surfaces(compiled)] + run_checks(
+        result.summary(), {n: (compiled.specs[n].lower, compiled.specs[n].upper) for n in names},
+        kinds, vector.split(vector.step))
     return result
