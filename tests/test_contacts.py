@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -72,7 +73,15 @@ def test_a_glass_slab_on_the_floor_is_found_and_a_lifted_one_is_not(small_scene_
     lifted = _slab_scene(tmp_path / "lifted", small_scene_dir, 1e-4)
     assert coincident_surfaces(compile_scene(load_scene(lifted))) == []
     # The repository's own glass: the sphere touches the cloth at a point, the bowl stands clear.
-    assert coincident_surfaces(compile_scene(load_scene("scenes/default/scene.toml"))) == []
+    default = Path("scenes/default").resolve()
+    text = (default / "scene.toml").read_text()
+    assert coincident_surfaces(compile_scene(load_scene(default / "scene.toml"))) == []
+    bowl = text.replace('mesh = "sphere.ply"', f'mesh = "{(default / "bowl.ply").as_posix()}"')
+    for asset in ("env.exr", "cloth.ply", "backdrop.ply", "checkerboard.png"):
+        bowl = bowl.replace(f'"{asset}"', f'"{(default / asset).as_posix()}"')
+    assert bowl != text
+    (tmp_path / "bowl.toml").write_text(bowl)
+    assert coincident_surfaces(compile_scene(load_scene(tmp_path / "bowl.toml"))) == []
 
 
 def test_a_fit_on_such_a_scene_says_so_first(small_scene_dir, tmp_path):

@@ -48,3 +48,15 @@ def test_environment_scale_recipe(small_scene_dir, tmp_path):
     scale = json.loads((out / "fit.json").read_text())["parameters"]["environment.scale"]
     assert scale["value"][0] == pytest.approx(1.0, rel=0.05)
     assert scale["truth"] == [1.0]
+
+
+def test_glass_recipe_takes_four_times_the_samples_on_a_gpu(monkeypatch):
+    sys.path.insert(0, str(RECIPES))
+    try:
+        import glass_absorption_ior as recipe
+    finally:
+        sys.path.remove(str(RECIPES))
+    assert recipe.settings().spp == 64  # this machine: the LLVM (CPU) variant
+    monkeypatch.setattr(recipe, "current_variant", lambda: "cuda_ad_rgb")
+    cuda = recipe.settings()
+    assert cuda.spp == 256 and cuda.glass_spp_factor == 4 and cuda.tie == ("glass.ior",)
