@@ -95,3 +95,16 @@ def test_a_fit_on_such_a_scene_says_so_first(small_scene_dir, tmp_path):
                  FitSettings(spp=4, max_iterations=1, refinement_steps=0))
     assert result.checks and result.checks[0].startswith("sphere's surface lies on floor's")
     assert json.loads(json.dumps(result.summary()))["checks"][0] == result.checks[0]
+
+
+def test_one_large_triangle_beside_many_small_ones_still_finds_the_contact():
+    # A floor of two large triangles plus a fine grid of small ones far away: the size classes
+    # keep the search local, and the glass square on the floor is found whole.
+    vertices, faces = SQUARE
+    floor = [[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]]
+    grid = np.array([[x, y, 3.0] for x in np.linspace(20, 21, 40) for y in np.linspace(20, 21, 40)])
+    small = np.array([[i, i + 1, i + 40] for i in range(len(grid) - 41) if (i + 1) % 40])
+    other_v = np.vstack([floor, grid])
+    other_f = np.vstack([[[0, 1, 2], [0, 2, 3]], small + 4])
+    assert coincident_area(vertices, faces, other_v, other_f) == pytest.approx(1.0)
+    assert coincident_area(vertices + [0, 0, 1e-3], faces, other_v, other_f) == 0.0

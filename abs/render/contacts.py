@@ -88,16 +88,21 @@ def _near_surface(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     if not inside.any():
         return near
     centroids = tri.mean(axis=1)
-    reach = float(np.linalg.norm(tri - centroids[:, None], axis=2).max()) + tolerance
-    candidates = cKDTree(centroids).query_ball_point(points[inside], reach)
+    radius = np.linalg.norm(tri - centroids[:, None], axis=2).max(axis=1)
     index = np.flatnonzero(inside)
-    pairs_p = np.repeat(index, [len(c) for c in candidates])
-    pairs_t = np.fromiter((t for c in candidates for t in c), np.int64, count=len(pairs_p))
-    for start in range(0, len(pairs_p), _BATCH):
-        p, t = pairs_p[start:start + _BATCH], pairs_t[start:start + _BATCH]
-        q = _closest_on_triangles(points[p], tri[t, 0], tri[t, 1], tri[t, 2])
-        hit = np.linalg.norm(points[p] - q, axis=1) <= tolerance
-        near[p[hit]] = True
+    # Triangles grouped by size (powers of two), each group searched within its own largest
+    # radius: one floor-sized triangle must not make every point a candidate of every small one.
+    size_class = np.floor(np.log2(np.maximum(radius, 1e-12))).astype(int)
+    for cls in np.unique(size_class):
+        members = np.flatnonzero(size_class == cls)
+        reach = float(radius[members].max()) + tolerance
+        candidates = cKDTree(centroids[members]).query_ball_point(points[index], reach)
+        pairs_p = np.repeat(index, [len(c) for c in candidates])
+        pairs_t = members[np.fromiter((t for c in candidates for t in c), np.int64, count=len(pairs_p))]
+        for start in range(0, len(pairs_p), _BATCH):
+            p, t = pairs_p[start:start + _BATCH], pairs_t[start:start + _BATCH]
+            q = _closest_on_triangles(points[p], tri[t, 0], tri[t, 1], tri[t, 2])
+            near[p[np.linalg.norm(points[p] - q, axis=1) <= tolerance]] = True
     return near
 
 

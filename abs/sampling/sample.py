@@ -26,6 +26,7 @@ import h5py
 import numpy as np
 
 from abs.errors import InputError, read_json
+from abs.render.contacts import coincident_surfaces
 from abs.runs.files import check_identity
 from abs.runs.identity import run_identity
 from abs.sampling.calibration import calibrate_render_noise
@@ -145,6 +146,7 @@ class SampleResult:
     truth: dict[str, list] | None = None
     posterior: RenderPosterior | None = field(default=None, repr=False)
     mode: np.ndarray | None = None  # where the walkers started (the likelihood's mode)
+    scene_checks: list[str] = field(default_factory=list)  # the scene's geometry (abs.render.contacts)
 
     def summary(self) -> dict:
         tau = self.progress.tau if self.progress.tau is not None else np.full(len(self.labels), np.nan)
@@ -184,7 +186,7 @@ class SampleResult:
             "spp": self.settings.spp,
             "downsample": self.settings.downsample,
         }
-        return {**summary, "checks": run_checks(summary)}
+        return {**summary, "checks": [*self.scene_checks, *run_checks(summary)]}
 
 
 def _finite(v) -> float | None:
@@ -482,4 +484,5 @@ def sample(scene, capture, parameters=None, settings: SampleSettings = SampleSet
                renders_before + problem.counter.renders - renders_during + progress.evaluations * per_eval)
     return SampleResult(tuple(names), sizes, vector.units, vector.labels(), chain, log_prob, progress,
                         burn, start, noise, reduced_chi2, renders, time.perf_counter() - t0,
-                        settings, rhat, predictive, truth, posterior, mode)
+                        settings, rhat, predictive, truth, posterior, mode,
+                        [c.message() for c in coincident_surfaces(model.compiled)])
