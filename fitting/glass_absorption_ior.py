@@ -57,7 +57,7 @@ Usage::
 from __future__ import annotations
 
 import abs
-from abs.render.variant import current_variant, set_variant
+from abs.render.variant import current_backend
 from abs.scene import load_scene
 from common import fit_stage, parser
 
@@ -76,8 +76,7 @@ def settings(material: str = "glass", starts=IOR_STARTS) -> abs.FitSettings:
     """The recipe's :class:`abs.FitSettings` for the glass material ``material``, with short fits
     from the IORs ``starts`` first (``None`` or empty: from the scene's values only); spp by the
     active variant's backend (``SPP``)."""
-    backend = (current_variant() or set_variant()).split("_")[0]
-    return abs.FitSettings(**SETTINGS, spp=SPP[backend], tie=(f"{material}.ior",),
+    return abs.FitSettings(**SETTINGS, spp=SPP[current_backend()], tie=(f"{material}.ior",),
                            starts=((f"{material}.ior", tuple(starts)),) if starts else ())
 
 

@@ -57,6 +57,6 @@ def test_glass_recipe_takes_four_times_the_samples_on_a_gpu(monkeypatch):
     finally:
         sys.path.remove(str(RECIPES))
     assert recipe.settings().spp == 64  # this machine: the LLVM (CPU) variant
-    monkeypatch.setattr(recipe, "current_variant", lambda: "cuda_ad_rgb")
+    monkeypatch.setattr(recipe, "current_backend", lambda: "cuda")
     cuda = recipe.settings()
     assert cuda.spp == 256 and cuda.glass_spp_factor == 4 and cuda.tie == ("glass.ior",)

@@ -35,6 +35,7 @@ from abs.render.path_lengths import (DEFAULT_NODES, JOINT_NODES, MAX_MATERIALS,
                                      PathLengthRecording, length_bins, reweight)
 from abs.render.rotation import rotation_matrix
 from abs.render.sensor import Sensor
+from abs.render.variant import current_backend
 from abs.scene.scene import Scene
 
 __all__ = ["CompiledScene", "compile_scene", "rotation_matrix", "shape_ids"]
@@ -60,7 +61,7 @@ def samples_in_flight() -> int:
         if value < 1:
             raise ValueError(f"$ABS_SAMPLES_IN_FLIGHT must be a positive integer, not {override!r}")
         return value
-    return SAMPLES_IN_FLIGHT["cuda" if mi.variant().startswith("cuda") else "llvm"]
+    return SAMPLES_IN_FLIGHT[current_backend()]
 
 # Material fields whose Mitsuba value is computed from the parameter in Dr.Jit, by material type.
 # The computation lives here, in the renderer bridge, because abs.scene (where the materials are)

@@ -16,7 +16,8 @@ import glob
 import os
 import re
 
-__all__ = ["DEFAULT_VARIANT", "ENV_VARIABLE", "find_libllvm", "set_variant", "current_variant"]
+__all__ = ["DEFAULT_VARIANT", "ENV_VARIABLE", "find_libllvm", "set_variant", "current_variant",
+           "current_backend"]
 
 DEFAULT_VARIANT = "llvm_ad_rgb"
 ENV_VARIABLE = "ABS_VARIANT"
@@ -76,6 +77,12 @@ def current_variant() -> str | None:
     import mitsuba as mi
 
     return mi.variant()
+
+
+def current_backend() -> str:
+    """``"cuda"`` when the active variant (activated first if none is) runs on a GPU, else
+    ``"llvm"``: the key of settings that differ by backend."""
+    return "cuda" if (current_variant() or set_variant()).startswith("cuda") else "llvm"
 
 
 def set_variant(variant: str | None = None) -> str:
