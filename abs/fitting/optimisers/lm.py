@@ -59,6 +59,11 @@ class RefinementState:
         point ``z`` they were rendered at: the Laplace approximation averages those of the
         steps whose points are averaged (:meth:`LevenbergMarquardt.curvatures`). Empty in
         checkpoints from before they were kept.
+    gradients, scales : tuple of ndarray
+        Per step, the gradient ``(J1 + J2)^T r / 2`` at ``curvature_at`` and the Jacobians'
+        :func:`column_scale`: with the curvatures they give the steps' Newton targets under the
+        pooled curvature (:func:`newton_targets`). Empty in checkpoints from before they were
+        kept (the estimate is then the mean of the points).
     """
 
     points: tuple = ()
@@ -68,6 +73,8 @@ class RefinementState:
     limited: tuple = ()
     curvatures: tuple = ()
     curvature_at: tuple = ()
+    gradients: tuple = ()
+    scales: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,6 +113,9 @@ class LMState:
             if r.curvatures:
                 out["refinement_curvatures"] = [np.asarray(h).tolist() for h in r.curvatures]
                 out["refinement_curvature_at"] = [np.asarray(z).tolist() for z in r.curvature_at]
+            if r.gradients:
+                out["refinement_gradients"] = [np.asarray(g).tolist() for g in r.gradients]
+                out["refinement_scales"] = [np.asarray(c).tolist() for c in r.scales]
         return out
 
     @classmethod
@@ -124,7 +134,11 @@ class LMState:
                                      tuple(np.asarray(h, np.float64)
                                            for h in d.get("refinement_curvatures", [])),
                                      tuple(np.asarray(z, np.float64)
-                                           for z in d.get("refinement_curvature_at", [])))
+                                           for z in d.get("refinement_curvature_at", [])),
+                                     tuple(np.asarray(g, np.float64)
+                                           for g in d.get("refinement_gradients", [])),
+                                     tuple(np.asarray(c, np.float64)
+                                           for c in d.get("refinement_scales", [])))
         converged = d.get("lm_converged")
         return cls(None if converged is None else bool(converged), refinement,
                    bool(d.get("recording_pairs", False)))
@@ -180,6 +194,9 @@ class LevenbergMarquardt(Optimiser):
             return None
         if solver.pairs:  # one point per independent seed pair, all of them
             return np.asarray(refinement.points, np.float64)
+        targets = newton_targets(refinement)
+        if targets is not None:
+            return targets
         return averaged_refinement_points(refinement.points, refinement.clipped)
 
     def scatter_points(self, state: OptimizerState) -> np.ndarray | None:
@@ -190,12 +207,17 @@ class LevenbergMarquardt(Optimiser):
         if solver.pairs:
             return np.asarray(refinement.points, np.float64)
         # All but the first quarter, arrived or not.
+        targets = newton_targets(refinement, arrived_only=False)
+        if targets is not None:
+            return targets
         return averaged_refinement_points(refinement.points)
 
     def sequential_points(self, state: OptimizerState) -> bool:
         """Gauss-Newton iterates are sequential (a clipped step walks); the points of recording
-        pairs are independent."""
-        return not (state.solver or LMState()).pairs
+        pairs are independent, and so, nearly, are the refinement's Newton targets (each from its
+        own renders; they share only the pooled curvature)."""
+        solver = state.solver or LMState()
+        return not solver.pairs and newton_targets(solver.refinement) is None
 
     def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
         """The refinement's cross curvatures (K, P, P) and the points ``z`` (K, P) they were
@@ -467,17 +489,47 @@ def cross_curvature(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
 
     ``E[J1^T J1] = Jbar^T Jbar + Cov`` overstates the curvature by the Jacobian's Monte-Carlo
     covariance; ``(J1^T J2 + J2^T J1) / 2`` has expectation ``Jbar^T Jbar`` exactly. Its noise can
-    make small eigenvalues negative: they are raised to 1e-3 of the largest, in the matrix scaled
-    to unit column sizes (``diag`` of the self products): the columns' sizes differ by orders (an
-    environment scale moves every pixel, an absorption the glass's few), and a floor relative to
-    the unscaled matrix's largest eigenvalue had raised glass absorption's curvature fivefold, so
-    that every step went a fifth of the way.
+    make small eigenvalues negative: they are raised as :func:`floored_curvature` says.
     """
-    H = 0.5 * (J1.T @ J2 + J2.T @ J1)
-    size = np.sqrt(np.maximum(column_scale(J1, J2), 1e-300))
+    return floored_curvature(0.5 * (J1.T @ J2 + J2.T @ J1), column_scale(J1, J2))
+
+
+def floored_curvature(H: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """``H`` (P, P; symmetric) with eigenvalues raised to 1e-3 of the largest, in the matrix
+    scaled to unit column sizes ``scale`` (:func:`column_scale`): the columns' sizes differ by
+    orders (an environment scale moves every pixel, an absorption the glass's few), and a floor
+    relative to the unscaled matrix's largest eigenvalue had raised glass absorption's curvature
+    fivefold, so that every step went a fifth of the way."""
+    size = np.sqrt(np.maximum(scale, 1e-300))
     w, V = np.linalg.eigh(H / np.outer(size, size))
     w = np.maximum(w, 1e-3 * max(float(w.max()), 1e-300))
     return (V * w) @ V.T * np.outer(size, size)
+
+
+#: A pooled curvature's diagonal is kept at least this many of its standard errors.
+CURVATURE_FLOOR_SE = 2.0
+
+
+def pooled_curvature(curvatures, scales) -> np.ndarray:
+    """The mean of several steps' cross curvatures (unfloored, each ``(J1^T J2 + J2^T J1) / 2``),
+    its diagonal kept at least :data:`CURVATURE_FLOOR_SE` standard errors of itself (from three
+    steps on) and floored at the mean column scale (:func:`floored_curvature`).
+
+    One pair's cross curvature of a column that is mostly noise (an IOR seen through a thin
+    glass wall before the checkerboard: its column's noise ten times its signal at 64 spp) can
+    be any size, and the Newton step it gives any length; the mean of ``K`` pairs has a ``K``
+    times smaller variance, while the curvature itself changes little between nearby points.
+    Where the mean is still within noise of zero (rare large jumps in the column: its pairs'
+    products scatter more than their mean), its inverse is not an estimate of anything, and the
+    floor keeps a Newton step from it no longer than the noise allows.
+    """
+    curvatures = np.asarray(curvatures, np.float64)
+    H = np.mean(curvatures, axis=0)
+    if len(curvatures) >= 3:
+        diagonal = np.diagonal(curvatures, axis1=1, axis2=2)
+        floor = CURVATURE_FLOOR_SE * diagonal.std(axis=0, ddof=1) / np.sqrt(len(curvatures))
+        H = H + np.diag(np.maximum(floor - np.diag(H), 0.0))
+    return floored_curvature(H, np.mean(np.asarray(scales, np.float64), axis=0))
 
 
 def column_scale(J1: np.ndarray, J2: np.ndarray) -> np.ndarray:
@@ -498,6 +550,37 @@ def _turned_back(points: list) -> bool:
     return bool(np.all(np.any(signs[1:] != signs[:-1], axis=0)))
 
 
+def _averaged_steps(n: int, travelling: list | None = None) -> range:
+    """Indices of the refinement points :func:`averaged_refinement_points` averages."""
+    start = max(1, n // 4)
+    if travelling is not None and any(travelling):
+        start = max(start, max(i for i, t in enumerate(travelling) if t) + 1)
+    return range(start, n) if start < n else range(max(n - 1, 0), n)
+
+
+def newton_targets(refinement: RefinementState, arrived_only: bool = True) -> np.ndarray | None:
+    """The refinement's estimates of the solution, one per averaged step: ``z_k - H^-1 g_k``,
+    each step's gradient ``g_k`` at the point ``z_k`` it was rendered at, under the curvature
+    ``H`` pooled over those steps (:func:`pooled_curvature`).
+
+    Near the solution ``E[g_k] = H (z_k - z*)``, so every target estimates ``z*`` and their mean
+    averages the gradients' noise; a step's own point (``z_k`` plus its clipped Newton step)
+    carries its own curvature's noise as well, which for a noisy column (the framed bowl's IOR)
+    made the points walk by 0.02 to 0.03 in the IOR per step. ``arrived_only``: leave out the
+    steps :func:`averaged_refinement_points` leaves out (those reached while still travelling);
+    otherwise all but the first quarter. ``None`` when the record is incomplete (a checkpoint
+    from before gradients were kept).
+    """
+    n = len(refinement.points)
+    if n == 0 or not (len(refinement.gradients) == len(refinement.scales)
+                      == len(refinement.curvatures) == len(refinement.curvature_at) == n):
+        return None
+    steps = _averaged_steps(n, refinement.clipped if arrived_only else None)
+    H = pooled_curvature([refinement.curvatures[i] for i in steps], [refinement.scales[i] for i in steps])
+    return np.array([refinement.curvature_at[i] - np.linalg.solve(H, refinement.gradients[i])
+                     for i in steps])
+
+
 def averaged_refinement_points(points: list, travelling: list | None = None) -> np.ndarray:
     """The refinement points that are averaged: all but the first quarter (at least the first
     one), which may still be travelling from the biased start, and none reached while travelling
@@ -506,25 +589,22 @@ def averaged_refinement_points(points: list, travelling: list | None = None) -> 
     which the points scatter independently around the unbiased solution. When every step was
     clipped, the last point alone."""
     points = np.asarray(points, np.float64)
-    if len(points) <= 1:
-        return points
-    start = max(1, len(points) // 4)
-    if travelling is not None and any(travelling):
-        start = max(start, max(i for i, t in enumerate(travelling) if t) + 1)
-    return points[start:] if start < len(points) else points[-1:]
+    return points[list(_averaged_steps(len(points), travelling))]
 
 
 def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
                             state: OptimizerState, steps: int, max_step: float = 1.0,
                             on_iteration: Callback | None = None) -> OptimizerState:
-    """Gauss-Newton steps on decorrelated renders; returns the mean of the stepped-to points
-    that have arrived (:func:`averaged_refinement_points`).
+    """Gauss-Newton steps on decorrelated renders; returns the mean of the steps' Newton targets
+    under their pooled curvature (:func:`newton_targets`) once the walk has arrived.
 
     Each step solves ``H dz = -g`` with ``g = (J1 + J2)^T r / 2`` and ``H`` the cross curvature
-    of two independent Jacobians (:func:`cross_curvature`): with ``r``, ``J1`` and ``J2`` from
-    three independent renders both are unbiased, so the step is the full Newton step on the
-    expected objective rather than one shortened by the Jacobian noise (which, with ``J1^T J1``,
-    took a third of the way per step at 16 spp on an IOR).
+    of two independent Jacobians (:func:`cross_curvature`), pooled over the more recent half of
+    the steps so far (:func:`pooled_curvature`): with ``r``, ``J1`` and ``J2`` from three
+    independent renders both are unbiased, so the step is the full Newton step on the expected
+    objective rather than one shortened by the Jacobian noise (which, with ``J1^T J1``, took a
+    third of the way per step at 16 spp on an IOR), and pooling keeps one pair's noisy
+    curvature from throwing the step anywhere.
 
     Steps are clipped coordinate by coordinate to trust radii (in typical steps) that start at
     ``max_step``: a noisy Jacobian must not throw the fit far from the Levenberg-Marquardt
@@ -556,6 +636,11 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
     kept = len(saved.curvatures) == len(points) == len(saved.curvature_at)
     curvatures = list(saved.curvatures) if kept else None
     curvature_at = list(saved.curvature_at) if kept else None
+    kept = kept and len(saved.gradients) == len(points) == len(saved.scales)
+    gradients = list(saved.gradients) if kept else None
+    scales = list(saved.scales) if kept else None
+    # The curvatures the steps pool (this run's alone after a checkpoint without them).
+    pool = list(zip(saved.curvatures, saved.scales)) if kept else []
     radius = np.full(np.size(state.z), float(max_step))
     if saved.radius is not None:
         radius = np.broadcast_to(np.asarray(saved.radius, np.float64), radius.shape).copy()
@@ -569,10 +654,16 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
         r, (J1, J2), loss = evaluate(z, state.iteration)
         state.history.append({"iteration": state.iteration, "loss": float(loss),
                               "z": list(map(float, z)), "phase": "refinement"})
+        cross, scale, gradient = 0.5 * (J1.T @ J2 + J2.T @ J1), column_scale(J1, J2), 0.5 * (J1 + J2).T @ r
         if curvatures is not None:
-            curvatures.append(0.5 * (J1.T @ J2 + J2.T @ J1))
+            curvatures.append(cross)
             curvature_at.append(np.array(z, np.float64))
-        step = np.linalg.solve(cross_curvature(J1, J2), -0.5 * (J1 + J2).T @ r)
+        if gradients is not None:
+            gradients.append(gradient)
+            scales.append(scale)
+        pool.append((cross, scale))
+        recent = pool[len(pool) // 2:]
+        step = np.linalg.solve(pooled_curvature(*zip(*recent)), -gradient)
         if previous is not None:
             same = np.sign(step) == np.sign(np.asarray(previous, np.float64))
             radius = np.where(clipped_before & same, 2.0 * radius,
@@ -596,9 +687,13 @@ def gauss_newton_refinement(evaluate: Callable[[np.ndarray, int], tuple],
                                                             radius.copy(), step,
                                                             tuple(limited or ()),
                                                             tuple(curvatures or ()),
-                                                            tuple(curvature_at or ())))
+                                                            tuple(curvature_at or ()),
+                                                            tuple(gradients or ()),
+                                                            tuple(scales or ())))
         state.solver = solver
-        state.z = np.mean(averaged_refinement_points(points, travelling), axis=0)
+        targets = newton_targets(solver.refinement)
+        state.z = np.mean(targets if targets is not None
+                          else averaged_refinement_points(points, travelling), axis=0)
         if on_iteration is not None:
             on_iteration(state)
     return state
