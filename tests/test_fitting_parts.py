@@ -278,6 +278,31 @@ def test_adam_converges_and_resumes_from_its_state():
     assert np.allclose(resumed.z, full.z, rtol=1e-12, atol=1e-12)
 
 
+def test_laplace_from_two_renders_leaves_the_renders_noise_out():
+    """A noisy estimator of a fixed dataset: the photographs' noise (0.05 per pixel) is the
+    data's, the renders' (0.2) is the estimator's, measured by its own scatter. From two
+    independent renders' residuals ``sigma`` is the photographs'; together with the measured
+    Monte-Carlo part the standard errors then cover at their stated rate, where ``|r|^2`` alone
+    counts the renders' noise twice and makes them about twice too wide."""
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(400, 3))
+    truth = np.array([1.0, -2.0, 0.5])
+    inside = [], []  # within one standard error: (two renders, one render)
+    for trial in range(200):
+        photo = A @ truth + 0.05 * rng.normal(size=400)
+        # Each refinement target fits the photograph plus one render's noise.
+        targets = [np.linalg.lstsq(A, photo + 0.2 * rng.normal(size=400), rcond=None)[0]
+                   for _ in range(12)]
+        estimate = np.mean(targets, axis=0)
+        r1, r2 = (A @ estimate + 0.2 * rng.normal(size=400) - photo for _ in range(2))
+        for inside_k, other in zip(inside, (r2, None)):
+            approx = with_monte_carlo_error(laplace(r1, A, residuals2=other), np.array(targets))
+            inside_k.append(np.abs(estimate - truth) < approx.stderr)
+    two, one = np.mean(inside[0]), np.mean(inside[1])
+    assert 0.6 < two < 0.76 and one > 0.85, (two, one)  # 1 s.e.: 68 %
+    assert abs(laplace(r1, A, residuals2=r2).pixel_sigma - 0.05) < 0.03
+
+
 def test_laplace_matches_the_linear_gaussian_posterior():
     A, y, truth = _linear_problem(m=400, noise=0.2)
     exact = np.linalg.lstsq(A, y, rcond=None)[0]

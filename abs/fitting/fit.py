@@ -30,7 +30,11 @@ from abs.model import ParameterVector, build_model, estimate_image_noise, render
 from abs.model.difference_steps import DifferenceStep, choose_difference_steps
 from abs.render.contacts import coincident_surfaces
 
-__all__ = ["fit", "FitResult", "ViewRenderings"]
+__all__ = ["fit", "FitResult", "ViewRenderings", "MONTE_CARLO_MIN_POINTS"]
+
+#: Fewest refinement targets (or recording pairs) whose scatter counts as measuring the
+#: estimate's Monte-Carlo error, so that the Laplace part leaves the renders' noise out.
+MONTE_CARLO_MIN_POINTS = 4
 
 
 @dataclass(frozen=True)
@@ -259,18 +263,23 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     r, J = problem.residuals(theta, settings.spp, seeds[0], jacobian=True, jacobian_seed=seeds[1])
     prior = np.where(has_prior, prior_sd, np.inf) if has_prior.any() else None
     J2 = problem.jacobian(theta, settings.spp, seeds[2])
+    points, scatter = optimiser.averaged_points(state), optimiser.scatter_points(state)
+    # When the estimate's Monte-Carlo error is measured (below), the pixel noise of the Laplace
+    # part is the photographs' and the model's alone: from two independent renders' residuals.
+    measured = points is not None and len(monte_carlo_spread(points, scatter)) >= MONTE_CARLO_MIN_POINTS
+    r2 = problem.residuals(theta, settings.spp, settings.seed + 96)[0] if measured else None
     # The refinement's own Jacobian pairs near the optimum average into the curvature: an IOR's
     # column through glass is noisy, and one pair's cross curvature can leave it unresolved.
     nearby = _refinement_curvatures(optimiser.curvatures(state), objective)
-    uncertainty = laplace(r, J, prior, jacobian2=J2, curvatures=nearby)
+    uncertainty = laplace(r, J, prior, jacobian2=J2, curvatures=nearby, residuals2=r2)
     # A curvature still unresolved may be resolved by more pairs at the optimum: up to three
     # more before saying so.
     more = []
     while not uncertainty.identifiable.all() and len(more) < 3:
         seed = settings.seed + 90 - 2 * len(more)
         more.append((problem.jacobian(theta, settings.spp, seed), problem.jacobian(theta, settings.spp, seed - 1)))
-        uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more, curvatures=nearby)
-    points, scatter = optimiser.averaged_points(state), optimiser.scatter_points(state)
+        uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more, curvatures=nearby,
+                              residuals2=r2)
     monte_carlo_points = 0
     if points is not None:
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731

@@ -11,9 +11,11 @@
   residuals and Jacobian come from independent renders with fresh seeds: they average out the
   two fixed seeds' own noise. The refinement's fixed point, ``E[J_B^T r_A] = 0``, is unbiased; its
   curvature comes from two independent Jacobians (:func:`cross_curvature`) so the steps are not
-  shortened by the Jacobian noise; its steps grow while they keep pointing the same way (the
-  unbiased solution can be many typical steps away); its iterates that have arrived are averaged,
-  and their scatter is the Monte-Carlo part of the standard errors.
+  shortened by the Jacobian noise, pooled over steps so that one pair's noise cannot throw a
+  step anywhere; its steps grow while they keep pointing the same way (the unbiased solution can
+  be many typical steps away); once it has arrived, every step's Newton target under the pooled
+  curvature estimates the solution: their mean is the estimate and their scatter the
+  Monte-Carlo part of the standard errors.
 
 Both phases are one optimiser because the refinement starts where Levenberg-Marquardt stopped
 and a resumed fit must know which phase it was in (:class:`LMState`).
