@@ -19,8 +19,8 @@ Why these settings:
   (fireflies); the fit's objective is unbiased by that noise (two fixed-seed renders,
   ``docs/fitting.md``), and the refinement's fresh renders average it out and measure it (the
   standard errors include it). What is left is the noise of the estimate itself: the glass
-  suite's framed bowl fitted IOR 1.549 +- 0.014 at 64 spp on 2 cores (10.3 min); on an H100 the
-  same fit takes about a minute, and at 256 spp (1.1 min) it gave IOR 1.5181 +- 0.0047 and
+  suite's framed bowl fitted IOR 1.535 +- 0.015 at 64 spp on 2 cores (15.4 min on a machine
+  where an earlier 10.3-min run took 14.2); on an H100 the same fit takes about a minute, and at 256 spp (1.1 min) it gave IOR 1.5181 +- 0.0047 and
   absorption 6.24, 2.52, 0.94 per metre for 1.52 and 6, 2.5, 1 (``SPP``).
 - **Four times the samples where the glass is seen** (``glass_spp_factor``): its refractions
   are the noisiest pixels and what the IOR is measured by; the rectangle around the glass costs
