@@ -149,7 +149,8 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
         photographs' noise and any model error) without the renders' own Monte-Carlo noise. Only
         for an estimate whose Monte-Carlo error is added separately
         (:func:`with_monte_carlo_error`): the renders' noise would otherwise be counted twice
-        (the glass suite's spheres at 64 spp: their errors a third of the standard errors).
+        (sphere-1.52 of the glass suite at 64 spp: absorption standard errors three times as
+        wide).
     """
     m, p = jacobian.shape
     other = residuals if residuals2 is None else residuals2
