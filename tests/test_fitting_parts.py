@@ -193,6 +193,26 @@ def test_refinement_pools_the_curvature_of_a_column_whose_noise_is_rare_large_ju
     assert np.all(np.mean(covered, axis=0) >= 0.8), np.mean(covered, axis=0)
 
 
+def test_refinement_estimate_stays_finite_for_a_coordinate_the_images_do_not_see():
+    """An absorption deep at its bound: its column and gradient are numerical dust (the glass
+    suite's distant bowl, whose Newton targets overflowed a float). The targets stay within a
+    few trust radii of their points, and the seen coordinates are estimated as usual."""
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A[:, :2], y, rcond=None)[0]
+    rng = np.random.default_rng(8)
+
+    def noisy(z, it):
+        J = [A + 0.05 * rng.normal(size=A.shape) for _ in range(2)]
+        for j in J:
+            j[:, 2] = 1e-160 * rng.normal(size=len(y))
+        return A[:, :2] @ z[:2] - y + 0.1 * rng.normal(size=len(y)), tuple(J), 0.0
+
+    state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, np.append(exact, -30.0)), steps=12)
+    assert np.all(np.isfinite(state.z)), state.z
+    assert abs(state.z[2] + 30.0) < 4.0 * 12 * np.max(state.solver.refinement.radius)
+    assert np.allclose(state.z[:2], exact, atol=0.05), state.z[:2] - exact
+
+
 def test_refinement_resumed_from_a_checkpoint_ends_where_one_run_does():
     """The pooled curvature and the Newton targets come from the steps' record, which a
     checkpoint keeps: a refinement stopped after 5 steps and resumed ends at the same estimate."""

@@ -510,6 +510,8 @@ def floored_curvature(H: np.ndarray, scale: np.ndarray) -> np.ndarray:
 
 #: A pooled curvature's diagonal is kept at least this many of its standard errors.
 CURVATURE_FLOOR_SE = 2.0
+#: A Newton target lies at most this many of its coordinate's trust radii from its point.
+TARGET_RADII = 4.0
 
 
 def pooled_curvature(curvatures, scales) -> np.ndarray:
@@ -579,8 +581,19 @@ def newton_targets(refinement: RefinementState, arrived_only: bool = True) -> np
         return None
     steps = _averaged_steps(n, refinement.clipped if arrived_only else None)
     H = pooled_curvature([refinement.curvatures[i] for i in steps], [refinement.scales[i] for i in steps])
-    return np.array([refinement.curvature_at[i] - np.linalg.solve(H, refinement.gradients[i])
-                     for i in steps])
+    # A coordinate the images do not see (an absorption deep at its bound 0: its column and
+    # gradient vanish together) has a curvature of numerical dust, and its Newton step is
+    # arbitrary: the glass suite's distant bowl got targets that overflowed a float. No target
+    # lies further from its point than TARGET_RADII trust radii (typical steps), as the walk's
+    # own steps do not.
+    reach = TARGET_RADII * (np.ones(H.shape[0]) if refinement.radius is None
+                            else np.asarray(refinement.radius, np.float64))
+    targets = []
+    for i in steps:
+        with np.errstate(all="ignore"):
+            step = -np.linalg.solve(H, refinement.gradients[i])
+        targets.append(refinement.curvature_at[i] + np.clip(np.nan_to_num(step, nan=0.0), -reach, reach))
+    return np.array(targets)
 
 
 def averaged_refinement_points(points: list, travelling: list | None = None) -> np.ndarray:
