@@ -232,6 +232,18 @@ def _mitsuba_threads(compiled, camera, spp, seed, material, anisotropy, roughnes
     return tracer.render(scene, compiled.environment, camera, spp, seed).numpy()
 
 
+def _plain_mitsuba(compiled, camera, spp, seed):
+    """Mitsuba's own integrator and plugins (stock ``dielectric`` at the green IOR, ``volpath``,
+    ``envmap``), not abs's path tracer: a null case whose photographs share no code path with
+    the model the diagnosis fits (the glass suite's photographs, ``benchmarks/glass_fit.py``)."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from glass_fit import mitsuba_photograph
+
+    return mitsuba_photograph(compiled, camera, spp, seed)
+
+
 #: Independent truth renderers: ``f(compiled, camera, spp, seed, **settings) -> (H, W, 3)``.
 TRUTH_RENDERERS = {
     "natural_vignetting": _natural_vignetting,   # cos^4 law, not abs's polynomial
@@ -244,6 +256,7 @@ TRUTH_RENDERERS = {
     "clean_glass_mesh": _clean_glass_mesh,       # the clean mesh, not smoothed normals
     "chrome_probe_map": _chrome_probe_map,       # exact conductor Fresnel, not Schlick's shape
     "mitsuba_threads": _mitsuba_threads,         # Mitsuba's single-scattering lobes, not abs's
+    "plain_mitsuba": _plain_mitsuba,             # Mitsuba's integrator and plugins, no effect
 }
 
 
@@ -254,6 +267,9 @@ CASES = [
     Case("sphere-stray_light", "sphere", ("stray_light",),
          photographs=("veiling_glare", {"fraction": 0.04, "sigma_frac": 0.15, "floor": [0.03, 0.03, 0.035]})),
     Case("sphere-null", "sphere", ()),
+    # Nothing missing, photographed by plain Mitsuba: what abs's renderer differs in from
+    # Mitsuba's (sampling, the glass plugin, the environment's lookup) must not look like physics.
+    Case("sphere-null-mitsuba", "sphere", (), photographs=("plain_mitsuba", {})),
     Case("sphere-absorption+vignetting", "sphere", ("absorption", "vignetting"),
          {"glass.absorption": [3.0, 6.0, 10.0]}, ("natural_vignetting", {"strength": 0.6})),
     Case("sphere-camera_response", "sphere", ("camera_response",),
