@@ -156,6 +156,28 @@ def test_refinement_averages_points_that_scatter_beyond_the_trust_radius():
     assert np.all(np.abs(state.z - exact) < 1.0), state.z - exact
 
 
+def _rare_jumps_problem():
+    """A linear model whose weak column's Jacobian noise is rare large jumps: the least-squares
+    solution, and ``noisy_for(seed)``, an evaluation with fresh noise at every call (column 0:
+    jumps of sd 1.3 in 20 of 400 pixels, noise energy 34 against a signal energy of 4)."""
+    A = np.random.default_rng(0).normal(size=(400, 3))
+    A[:, 0] *= 0.1
+    y = A @ np.array([0.5, -1.0, 2.0])
+
+    def noisy_for(seed):
+        rng = np.random.default_rng(seed)
+
+        def noisy(z, it):
+            J = [A.copy(), A.copy()]
+            for j in J:
+                j[:20, 0] += 1.3 * rng.normal(size=20)
+            return A @ z - y + 0.2 * rng.normal(size=400), tuple(J), 0.0
+
+        return noisy
+
+    return np.linalg.lstsq(A, y, rcond=None)[0], noisy_for
+
+
 def test_refinement_pools_the_curvature_of_a_column_whose_noise_is_rare_large_jumps():
     """An IOR seen through a thin glass wall before the checkerboard: its Jacobian column's
     noise is rare large jumps (pixels where an edge is crossed), ten times its signal energy, so
@@ -166,22 +188,11 @@ def test_refinement_pools_the_curvature_of_a_column_whose_noise_is_rare_large_ju
     from abs.fitting.laplace import LaplaceApproximation
     from abs.fitting.optimisers.lm import LevenbergMarquardt
 
-    rng0 = np.random.default_rng(0)
-    A = rng0.normal(size=(400, 3))
-    A[:, 0] *= 0.1  # signal energy 4
-    y = A @ np.array([0.5, -1.0, 2.0])
-    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    exact, noisy_for = _rare_jumps_problem()
     optimiser, errors, covered = LevenbergMarquardt(), [], []
     none = LaplaceApproximation(np.zeros((3, 3)), np.zeros(3), np.eye(3), 0.0, np.ones(3, bool))
     for seed in range(30):
-        rng = np.random.default_rng(seed)
-
-        def noisy(z, it):  # column 0: jumps of sd 1.3 in 20 of 400 pixels (noise energy 34)
-            J = [A.copy(), A.copy()]
-            for j in J:
-                j[:20, 0] += 1.3 * rng.normal(size=20)
-            return A @ z - y + 0.2 * rng.normal(size=400), tuple(J), 0.0
-
+        noisy = noisy_for(seed)
         state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, exact + [0.3, 0, 0]), steps=16)
         stated = with_monte_carlo_error(none, optimiser.averaged_points(state),
                                         optimiser.scatter_points(state),
@@ -197,22 +208,11 @@ def test_refinement_of_few_steps_does_not_trust_one_pairs_curvature_of_a_noisy_c
     """Two refinement steps average one: its Newton target under one pair's unfloored curvature
     of a column that is mostly noise (the rare large jumps above) lands anywhere within four
     trust radii (1.9 RMS over seeds). Below three averaged steps the estimate is the points'."""
-    rng0 = np.random.default_rng(0)
-    A = rng0.normal(size=(400, 3))
-    A[:, 0] *= 0.1
-    y = A @ np.array([0.5, -1.0, 2.0])
-    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+    exact, noisy_for = _rare_jumps_problem()
     errors = []
     for seed in range(40):
-        rng = np.random.default_rng(seed)
-
-        def noisy(z, it):
-            J = [A.copy(), A.copy()]
-            for j in J:
-                j[:20, 0] += 1.3 * rng.normal(size=20)
-            return A @ z - y + 0.2 * rng.normal(size=400), tuple(J), 0.0
-
-        state = gauss_newton_refinement(noisy, OptimizerState("lm", 0, exact + [0.3, 0, 0]), steps=2)
+        state = gauss_newton_refinement(noisy_for(seed), OptimizerState("lm", 0, exact + [0.3, 0, 0]),
+                                        steps=2)
         errors.append(state.z - exact)
     rms = np.sqrt(np.mean(np.square(errors), axis=0))
     assert rms[0] < 0.8 and np.all(rms[1:] < 0.3), rms

@@ -270,6 +270,8 @@ CASES = [
     # Nothing missing, photographed by plain Mitsuba: what abs's renderer differs in from
     # Mitsuba's (sampling, the glass plugin, the environment's lookup) must not look like physics.
     Case("sphere-null-mitsuba", "sphere", (), photographs=("plain_mitsuba", {})),
+    # Nothing missing in the scene whose cloth reflectance is fitted too (the trade-off cases').
+    Case("cloth-null", "cloth", ()),
     Case("sphere-absorption+vignetting", "sphere", ("absorption", "vignetting"),
          {"glass.absorption": [3.0, 6.0, 10.0]}, ("natural_vignetting", {"strength": 0.6})),
     Case("sphere-camera_response", "sphere", ("camera_response",),
