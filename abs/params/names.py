@@ -116,8 +116,9 @@ def _null(value, size: int) -> np.ndarray | None:
 #: Conditioning steps of sensor fields that the default (by unit and bound) would misjudge: a
 #: colour matrix's diagonal sits at 1, its off-diagonal at 0, yet a change of 0.05 in any entry
 #: is a 5 % change of a channel; a camera-matrix offset moves the image by about its size in
-#: pixels, and images stay near linear over a fraction of a pixel, not over the bounds' 50.
-_SENSOR_STEPS = {"colour_matrix": 0.05, "intrinsics_offset": 0.3}
+#: pixels, and images stay near linear over a fraction of a pixel, not over the bounds' 50; a
+#: camera turn of 0.002 rad moves the image by a fraction of a pixel at the suite's focal lengths.
+_SENSOR_STEPS = {"colour_matrix": 0.05, "intrinsics_offset": 0.3, "camera_turn": 0.002}
 
 
 def parameter_specs(scene) -> dict[str, Parameter]:

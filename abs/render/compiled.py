@@ -103,7 +103,8 @@ class CompiledScene:
                                        spec.inverse_distance, spec.center, spec.orientation,
                                        spec.probe_fresnel, spec.probe_view)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
-                             scene.sensor.colour_matrix, scene.sensor.intrinsics_offset)
+                             scene.sensor.colour_matrix, scene.sensor.intrinsics_offset,
+                             scene.sensor.camera_turn)
         self.mitsuba_scene = self._load(self.mitsuba_dict(include_environment=False))
         self.params = mi.traverse(self.mitsuba_scene)
         self._rest = {}

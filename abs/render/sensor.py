@@ -19,10 +19,12 @@ focal length (OpenCV normalised coordinates), ``M`` the 3x3 colour matrix (rende
 photograph RGB), and ``L(u + d(u))`` the rendering resampled (Catmull-Rom cubics) where the calibrated camera
 sees what the photographs' camera, with principal point ``c + dc`` and focal lengths scaled by
 ``1 + e``, sees at pixel ``u`` (``K K'^-1 u``: exact for a pinhole, skew included, since scaling
-the focal lengths scales the skew with them). A camera turned by a small angle about its centre
-moves the image like a principal-point shift of ``f`` times the angle, so that shift also stands
-for a common small rotation of the cameras; a translation (parallax) is not an image warp and is
-not modelled. The colour matrix sits **before** the response: a camera mixes colours in its
+the focal lengths scales the skew with them). A camera turned about its centre (``camera_turn``,
+a rotation vector ``w``: a point at ``x`` in the calibrated camera's frame is at ``R(w) x`` in the
+photographs') sees the calibrated camera's image through the homography ``K R(w)^T K'^-1``, also
+exact for a pinhole; to first order it moves the image like a principal-point shift of ``f``
+times the angle, but the shift grows towards the image's edges by about ``(x / f)^2`` of itself,
+which a shift cannot follow. A translation (parallax) is not an image warp and is not modelled. The colour matrix sits **before** the response: a camera mixes colours in its
 linear signal (filter cross-talk, white balance, its colour-correction matrix), and any tone
 curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
 ``G_c *`` is a convolution with a Gaussian of standard deviation ``blur_px[c]``
@@ -171,9 +173,13 @@ class Sensor:
         ``[dcx, dcy, dfx]`` in pixels of the full-resolution photographs: the photographs'
         principal point minus the calibrated one, and their focal length ``fx`` minus the
         calibrated one (``fy`` and the skew scale by the same ratio); zeros when left out.
+    camera_turn : array-like, shape (3,), optional
+        Rotation vector (radians, camera frame) of the photographs' cameras against the
+        calibrated poses (:class:`~abs.scene.scene.SensorSpec`); zeros when left out.
     """
 
-    def __init__(self, vignetting, response, stray_light, colour_matrix=None, intrinsics_offset=None):
+    def __init__(self, vignetting, response, stray_light, colour_matrix=None, intrinsics_offset=None,
+                 camera_turn=None):
         self.vignetting = opaque(mi.Float, np.asarray(vignetting, np.float32))
         self.response = opaque(mi.Float, np.asarray(response, np.float32))
         self.stray_light = opaque(mi.Float, np.asarray(stray_light, np.float32))
@@ -181,6 +187,8 @@ class Sensor:
         self.colour_matrix = opaque(mi.Float, np.asarray(matrix, np.float32).ravel())
         offset = np.zeros(3) if intrinsics_offset is None else intrinsics_offset
         self.intrinsics_offset = opaque(mi.Float, np.asarray(offset, np.float32).ravel())
+        turn = np.zeros(3) if camera_turn is None else camera_turn
+        self.camera_turn = opaque(mi.Float, np.asarray(turn, np.float32).ravel())
 
     def is_linear(self) -> bool:
         """Whether the output is affine in the radiance with a fixed derivative: the response is 1
@@ -188,7 +196,7 @@ class Sensor:
         :meth:`apply` is then the same at every image (what lets a batched gradient skip
         rendering the whole image first, :meth:`CompiledScene.render_backward`)."""
         arrays = (self.vignetting, self.response, self.stray_light, self.colour_matrix,
-                  self.intrinsics_offset)
+                  self.intrinsics_offset, self.camera_turn)
         if any(dr.grad_enabled(a) for a in arrays):
             return False
         return bool(np.all(self.response.numpy() == 1.0))
@@ -214,7 +222,8 @@ class Sensor:
         return mi.TensorXf(out, (h, w, 3))
 
     def _resample(self, flat: mi.Float, camera: Camera) -> mi.Float:
-        """The (H, W, 3) image ``flat`` as the photographs' camera (``intrinsics_offset``) sees it:
+        """The (H, W, 3) image ``flat`` as the photographs' camera (``intrinsics_offset``,
+        ``camera_turn``) sees it:
         each pixel interpolated at ``u + d(u)`` (module docstring) by Catmull-Rom cubics,
         indices clamped to the frame."""
         b = camera.block
@@ -227,10 +236,23 @@ class Sensor:
         # The focal error as a ratio: the same on the fine and the block pixels.
         e = dr.gather(mi.Float, self.intrinsics_offset, mi.UInt32(2)) / dr.opaque(mi.Float, camera.K[0, 0] * b)
         cx, cy = dr.opaque(mi.Float, camera.K[0, 2]), dr.opaque(mi.Float, camera.K[1, 2])
+        fx, fy = dr.opaque(mi.Float, camera.K[0, 0]), dr.opaque(mi.Float, camera.K[1, 1])
+        skew = dr.opaque(mi.Float, camera.K[0, 1])
         # Written as a displacement added to the pixel's own coordinate, so that at the null
         # value the sample is the pixel centre exactly (u + -0 = u; ``cx + (u - cx)`` need not be).
-        x = dr.clip(u - (dcx + e * (u - cx)) / (1.0 + e), 0.0, mi.Float(width - 1))
-        y = dr.clip(v - (dcy + e * (v - cy)) / (1.0 + e), 0.0, mi.Float(height - 1))
+        # The offset alone moves the pixel by (du, dv) (``K K'^-1``); in normalised coordinates
+        # (A: K's 2x2 part) the photographs' ray is (x0 + px, y0 + py, 1) with (px, py) =
+        # A^-1 (du, dv), turned into the calibrated frame by R(w)^T = R(-w) and projected; the
+        # projection less (x0, y0), mapped back by A, is the displacement.
+        du = -(dcx + e * (u - cx)) / (1.0 + e)
+        dv = -(dcy + e * (v - cy)) / (1.0 + e)
+        y0 = (v - cy) / fy
+        x0 = (u - cx - skew * y0) / fx
+        py = dv / fy
+        px = (du - skew * py) / fx
+        dx, dy = self._turned(x0 + px, y0 + py, x0, y0, px, py)
+        x = dr.clip(u + (fx * dx + skew * dy), 0.0, mi.Float(width - 1))
+        y = dr.clip(v + fy * dy, 0.0, mi.Float(height - 1))
         x0, y0 = dr.floor(x), dr.floor(y)
         wx, wy = _catmull_rom(x - x0), _catmull_rom(y - y0)
         i0, j0 = mi.Int32(x0), mi.Int32(y0)
@@ -244,6 +266,23 @@ class Sensor:
                 row = term if row is None else row + term
             out = wy[n] * row if out is None else out + wy[n] * row
         return out
+
+    def _turned(self, xn, yn, x0, y0, px, py):
+        """``(X / Z - x0, Y / Z - y0)`` for ``(X, Y, Z) = R(-w) (xn, yn, 1)``, ``w`` the camera
+        turn, ``(xn, yn) = (x0 + px, y0 + py)``: Rodrigues' formula with ``sin t / t`` and
+        ``(1 - cos t) / t^2`` to second order in ``t = |w|`` (the error, ``t^4 / 120``, is below
+        1e-6 within the bounds of 0.1 rad). Every term is a product with a component of ``w``,
+        so at ``w = 0`` the result is ``(px, py)`` exactly."""
+        w = [dr.gather(mi.Float, self.camera_turn, mi.UInt32(i)) for i in range(3)]
+        t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
+        sinc, versinc = 1.0 - t2 / 6.0, 0.5 - t2 / 24.0
+        d = (xn, yn, 1.0)
+        # R(-w) d = d - sinc (w x d) + versinc w x (w x d).
+        a = (w[1] * d[2] - w[2] * d[1], w[2] * d[0] - w[0] * d[2], w[0] * d[1] - w[1] * d[0])
+        b = (w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2], w[0] * a[1] - w[1] * a[0])
+        extra = [versinc * b[i] - sinc * a[i] for i in range(3)]
+        z = 1.0 + extra[2]
+        return (px + extra[0] - extra[2] * x0) / z, (py + extra[1] - extra[2] * y0) / z
 
     def _blur(self, flat: mi.Float, camera: Camera) -> mi.Float:
         """The (H, W, 3) image ``flat`` blurred by the camera's point-spread function

@@ -75,6 +75,13 @@ class SensorSpec:
         ``(dcx, dcy)``, focal length ``fx`` by ``dfx`` with ``fy`` and the skew scaled alike;
         zeros: the calibration is right. Rendered as a resampling of the image (exact for a
         pinhole; ``abs.render.sensor``), applied first.
+    camera_turn : ndarray, shape (3,)
+        Rotation vector (radians, camera frame: x right, y down, z forward) by which every
+        photograph's camera is turned about its own centre against the calibrated pose: a point
+        at ``x`` in the calibrated camera's frame is at ``R(camera_turn) x`` in the
+        photographs'. Zeros: the calibrated poses are right. Rendered, with
+        ``intrinsics_offset``, as the resampling by the homography ``K R^T K'^-1`` (exact for a
+        pinhole turned about its centre).
     """
 
     # field: (size, unit, lower, upper, null value: one number for every entry, or ``size``
@@ -89,6 +96,8 @@ class SensorSpec:
         # Bounded to offsets a calibration could plausibly miss by; beyond them the resampling's
         # clamped border would dominate.
         "intrinsics_offset": (3, "px", -50.0, 50.0, 0.0),
+        # A few degrees: beyond them the resampling's clamped border would dominate.
+        "camera_turn": (3, "rad", -0.1, 0.1, 0.0),
     }
 
     vignetting: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -96,6 +105,7 @@ class SensorSpec:
     stray_light: np.ndarray = field(default_factory=lambda: np.zeros(3))
     colour_matrix: np.ndarray = field(default_factory=lambda: np.eye(3).ravel())
     intrinsics_offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    camera_turn: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @staticmethod
     def null(name: str) -> np.ndarray:
