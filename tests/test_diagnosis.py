@@ -276,6 +276,25 @@ def test_a_short_fit_candidate_is_fitted_even_behind_stronger_score_test_candida
     assert [s.candidate.effect for s in _eligible(weak, top_k=2)] == ["absorption"]
 
 
+def test_another_form_of_an_accepted_effect_is_still_fitted():
+    """A clear winner spares the runner-up's fit, unless the runner-up is another form of the
+    winner's effect (a camera turn beside a principal-point shift): only their fits tell them
+    apart."""
+    from types import SimpleNamespace
+
+    from abs.diagnosis.diagnose import _clear_winner
+    from abs.diagnosis.effects import Candidate
+    from abs.diagnosis.score import CandidateScore
+
+    def score(name, target, gain):
+        return CandidateScore(Candidate(name, target, (f"{target}.{name}",)), gain, 1, 1000, "score test")
+
+    first = score("camera_misalignment", "sensor", 3000.0)
+    passed = (first, None, SimpleNamespace(accepted=True, delta_bic=-9000.0))
+    assert _clear_winner(passed, score("stray_light", "sensor", 400.0))
+    assert not _clear_winner(passed, score("camera_misalignment", "cameras", 3000.0))
+
+
 @pytest.mark.slow
 def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
     """A 4 mm, 2.3 degree displacement of a 6 cm box moves its outline by about half a pixel at
