@@ -9,9 +9,10 @@ edges (the checkerboard's, the objects' outlines). Two forms, offered as two can
 
 Both render as a resampling of the image (``abs.render.sensor``), exact for a pinhole. To first
 order a turn by ``a`` moves the image like a principal-point shift of ``f a`` pixels, so the two
-forms score alike; they differ towards the image's edges, where a turn's shift grows by about
-``(x / f)^2`` of itself: at 160x120 that remainder, left to the shift, let a false environment
-turn in after it. Once either form is in the scene file (fitted or set), neither is offered.
+forms score alike and both are fitted (:func:`abs.diagnosis.diagnose._clear_winner`); they
+differ towards the image's edges, where a turn's shift grows by about ``(x / f)^2`` of itself,
+which a focal error partly mimics. Once either form is in the scene file (fitted or set),
+neither is offered.
 Neither models a different error per view or a translation of a camera (parallax).
 """
 
