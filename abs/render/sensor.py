@@ -24,9 +24,9 @@ a rotation vector ``w``: a point at ``x`` in the calibrated camera's frame is at
 photographs') sees the calibrated camera's image through the homography ``K R(w)^T K'^-1``, also
 exact for a pinhole; to first order it moves the image like a principal-point shift of ``f``
 times the angle, but the shift grows towards the image's edges by about ``(x / f)^2`` of itself,
-which a shift cannot follow. A translation (parallax) is not an image warp and is not modelled. The colour matrix sits **before** the response: a camera mixes colours in its
-linear signal (filter cross-talk, white balance, its colour-correction matrix), and any tone
-curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
+which a shift cannot follow. A translation (parallax) is not an image warp and is not modelled.
+The colour matrix sits **before** the response: a camera mixes colours in its linear signal
+(filter cross-talk, white balance, its colour-correction matrix), and any tone curve comes after. Stray light is light reaching the sensor, so it goes through ``M`` too.
 ``G_c *`` is a convolution with a Gaussian of standard deviation ``blur_px[c]``
 (:func:`blur_kernel`): a capture build demosaics and resamples the photographs' camera RGB, so
 the blur acts after the colour mixing, and demosaicing works on linear values (a camera's own

@@ -12,8 +12,8 @@ order a turn by ``a`` moves the image like a principal-point shift of ``f a`` pi
 forms score alike and both are fitted (:func:`abs.diagnosis.diagnose._clear_winner`); they
 differ towards the image's edges, where a turn's shift grows by about ``(x / f)^2`` of itself,
 which a focal error partly mimics. Once either form is in the scene file (fitted or set),
-neither is offered.
-Neither models a different error per view or a translation of a camera (parallax).
+neither is offered. Neither models a different error per view or a translation of a camera
+(parallax).
 """
 
 from __future__ import annotations
