@@ -25,13 +25,13 @@ photographs') sees the calibrated camera's image through the homography ``K R(w)
 exact for a pinhole; to first order it moves the image like a principal-point shift of ``f``
 times the angle, but the shift grows towards the image's edges by about ``(x / f)^2`` of itself,
 which a shift cannot follow. A translation (parallax) is not an image warp and is not modelled.
-The colour matrix sits **before** the response: a camera mixes colours in its linear signal
-(filter cross-talk, white balance, its colour-correction matrix), and any tone curve comes after.
-Stray light is light reaching the sensor, so it goes through ``M`` too. ``G_c *`` is a
-convolution with a Gaussian of standard deviation ``blur_px[c]`` (:func:`blur_kernel`): a capture build demosaics and resamples the photographs' camera RGB, so
-the blur acts after the colour mixing, and demosaicing works on linear values (a camera's own
-processor demosaics its raw data before any tone curve), so before the response. It is left out
-entirely when every ``blur_px`` is 0.
+The colour matrix sits **before** the response: a camera mixes colours in its linear signal (filter
+cross-talk, white balance, its colour-correction matrix), and any tone curve comes after. Stray
+light is light reaching the sensor, so it goes through ``M`` too. ``G_c *`` is a convolution with a
+Gaussian of standard deviation ``blur_px[c]`` (:func:`blur_kernel`): a capture build demosaics and
+resamples the photographs' camera RGB, so the blur acts after the colour mixing, and demosaicing
+works on linear values (a camera's own processor demosaics its raw data before any tone curve), so
+before the response. It is left out entirely when every ``blur_px`` is 0.
 
 Every operation is exact at its null value (``dc = df = 0``: the displacement is ``-0``, the
 sample sits on the pixel centre with Catmull-Rom weights 0, 1, 0, 0, ``L * 1 + L' * 0 ...``; ``k = 0``: ``L * 1``;
