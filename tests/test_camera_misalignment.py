@@ -139,33 +139,20 @@ def setup(small_scene_dir):
     return compiled, _camera(), weights
 
 
-@pytest.mark.parametrize("value, direction", [
-    ([0.0, 0.0, 0.0], [1.0, -0.6, 0.8]),   # what the score test sees
-    ([0.7, -0.4, 1.5], [1.0, -0.6, 0.8]),
+@pytest.mark.parametrize("name, value, step", [
+    ("intrinsics_offset", [0.0, 0.0, 0.0], 0.05),   # what the score test sees
+    ("intrinsics_offset", [0.7, -0.4, 1.5], 0.05),
+    ("camera_turn", [0.0, 0.0, 0.0], 0.002),
+    ("camera_turn", [0.02, -0.01, 0.03], 0.002),
 ])
-def test_intrinsics_offset_gradient(setup, value, direction):
+def test_misalignment_gradients(setup, name, value, step):
     compiled, camera, weights = setup
-    compiled.set("sensor.intrinsics_offset", value)
+    compiled.set(f"sensor.{name}", value)
     try:
-        res = directional_gradient(compiled, camera, "sensor.intrinsics_offset", direction, 0.05,
+        res = directional_gradient(compiled, camera, f"sensor.{name}", [1.0, -0.6, 0.8], step,
                                    weights, seeds=3, spp=4 * SPP, full=True)
     finally:
-        compiled.set("sensor.intrinsics_offset", np.zeros(3))
-    assert_gradients_agree(*res, rel=0.02)
-
-
-@pytest.mark.parametrize("value, direction", [
-    ([0.0, 0.0, 0.0], [1.0, -0.6, 0.8]),
-    ([0.02, -0.01, 0.03], [1.0, -0.6, 0.8]),
-])
-def test_camera_turn_gradient(setup, value, direction):
-    compiled, camera, weights = setup
-    compiled.set("sensor.camera_turn", value)
-    try:
-        res = directional_gradient(compiled, camera, "sensor.camera_turn", direction, 0.002,
-                                   weights, seeds=3, spp=4 * SPP, full=True)
-    finally:
-        compiled.set("sensor.camera_turn", np.zeros(3))
+        compiled.set(f"sensor.{name}", np.zeros(3))
     assert_gradients_agree(*res, rel=0.02)
 
 
