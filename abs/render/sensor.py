@@ -250,7 +250,7 @@ class Sensor:
         x0 = (u - cx - skew * y0) / fx
         py = dv / fy
         px = (du - skew * py) / fx
-        dx, dy = self._turned(x0 + px, y0 + py, x0, y0, px, py)
+        dx, dy = self._turned(x0, y0, px, py)
         x = dr.clip(u + (fx * dx + skew * dy), 0.0, mi.Float(width - 1))
         y = dr.clip(v + fy * dy, 0.0, mi.Float(height - 1))
         x0, y0 = dr.floor(x), dr.floor(y)
@@ -267,16 +267,16 @@ class Sensor:
             out = wy[n] * row if out is None else out + wy[n] * row
         return out
 
-    def _turned(self, xn, yn, x0, y0, px, py):
-        """``(X / Z - x0, Y / Z - y0)`` for ``(X, Y, Z) = R(-w) (xn, yn, 1)``, ``w`` the camera
-        turn, ``(xn, yn) = (x0 + px, y0 + py)``: Rodrigues' formula with ``sin t / t`` and
+    def _turned(self, x0, y0, px, py):
+        """``(X / Z - x0, Y / Z - y0)`` for ``(X, Y, Z) = R(-w) (x0 + px, y0 + py, 1)``, ``w``
+        the camera turn: Rodrigues' formula with ``sin t / t`` and
         ``(1 - cos t) / t^2`` to second order in ``t = |w|`` (the error, ``t^4 / 120``, is below
         1e-6 within the bounds of 0.1 rad). Every term is a product with a component of ``w``,
         so at ``w = 0`` the result is ``(px, py)`` exactly."""
         w = [dr.gather(mi.Float, self.camera_turn, mi.UInt32(i)) for i in range(3)]
         t2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2]
         sinc, versinc = 1.0 - t2 / 6.0, 0.5 - t2 / 24.0
-        d = (xn, yn, 1.0)
+        d = (x0 + px, y0 + py, 1.0)
         # R(-w) d = d - sinc (w x d) + versinc w x (w x d).
         a = (w[1] * d[2] - w[2] * d[1], w[2] * d[0] - w[0] * d[2], w[0] * d[1] - w[1] * d[0])
         b = (w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2], w[0] * a[1] - w[1] * a[0])

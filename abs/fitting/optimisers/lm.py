@@ -209,7 +209,7 @@ class LevenbergMarquardt(Optimiser):
         if solver.pairs:
             return np.asarray(refinement.points, np.float64)
         # All but the first quarter, arrived or not; targets where the estimate is theirs.
-        if newton_targets(refinement) is not None:
+        if _target_steps(refinement) is not None:
             return newton_targets(refinement, arrived_only=False)
         return averaged_refinement_points(refinement.points)
 
@@ -218,7 +218,7 @@ class LevenbergMarquardt(Optimiser):
         pairs are independent, and so, nearly, are the refinement's Newton targets (each from its
         own renders; they share only the pooled curvature)."""
         solver = state.solver or LMState()
-        return not solver.pairs and newton_targets(solver.refinement) is None
+        return not solver.pairs and _target_steps(solver.refinement) is None
 
     def curvatures(self, state: OptimizerState) -> tuple[np.ndarray, np.ndarray] | None:
         """The refinement's cross curvatures (K, P, P) and the points ``z`` (K, P) they were
@@ -563,6 +563,17 @@ def _averaged_steps(n: int, travelling: list | None = None) -> range:
     return range(start, n) if start < n else range(max(n - 1, 0), n)
 
 
+def _target_steps(refinement: RefinementState, arrived_only: bool = True) -> range | None:
+    """The steps :func:`newton_targets` uses, or ``None`` when it gives none (its docstring):
+    whether the estimate is the targets', without solving for them."""
+    n = len(refinement.points)
+    if n == 0 or not (len(refinement.gradients) == len(refinement.scales)
+                      == len(refinement.curvatures) == len(refinement.curvature_at) == n):
+        return None
+    steps = _averaged_steps(n, refinement.clipped if arrived_only else None)
+    return steps if len(steps) >= MIN_TARGET_STEPS else None
+
+
 def newton_targets(refinement: RefinementState, arrived_only: bool = True) -> np.ndarray | None:
     """The refinement's estimates of the solution, one per averaged step: ``z_k - H^-1 g_k``,
     each step's gradient ``g_k`` at the point ``z_k`` it was rendered at, under the curvature
@@ -580,12 +591,8 @@ def newton_targets(refinement: RefinementState, arrived_only: bool = True) -> np
     of rare large jumps, two steps' estimate missed that coordinate by 1.9 RMS, the points by
     0.5).
     """
-    n = len(refinement.points)
-    if n == 0 or not (len(refinement.gradients) == len(refinement.scales)
-                      == len(refinement.curvatures) == len(refinement.curvature_at) == n):
-        return None
-    steps = _averaged_steps(n, refinement.clipped if arrived_only else None)
-    if len(steps) < MIN_TARGET_STEPS:
+    steps = _target_steps(refinement, arrived_only)
+    if steps is None:
         return None
     H = pooled_curvature([refinement.curvatures[i] for i in steps], [refinement.scales[i] for i in steps])
     # A coordinate the images do not see (an absorption deep at its bound 0: its column and
