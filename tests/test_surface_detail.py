@@ -97,19 +97,20 @@ def test_forward_mode_against_finite_differences(glass_scene_dir, tmp_path, valu
 def test_fits_derivative_against_independent_differences(setup):
     """The derivative fits use (central differences of step ``difference_step`` with common
     random numbers, since the checkerboard's edges seen through the glass move), against
-    differences of independent renders, weighted along the image's change."""
+    differences of independent renders over the same step, weighted along the image's change."""
     compiled, camera, _ = setup
 
     def render(s, spp, seed):
         compiled.set(NAME, [s])
         return compiled.render(camera, spp=spp, seed=seed).numpy().astype(np.float64)
 
+    h = compiled.specs[NAME].difference_step
     try:
-        weights = render(0.1, 256, 101) - render(-0.1, 256, 102)
+        weights = render(h, 256, 101) - render(-h, 256, 102)
         compiled.set(NAME, [0.0])
         estimates = [float(np.sum(compiled.render_forward(camera, {NAME: [1.0]}, spp=32, seed=s)[1]
                                   .numpy() * weights)) for s in range(6)]
-        reference = [float(np.sum((render(0.1, 64, 10 + s) - render(-0.1, 64, 20 + s)) * weights)) / 0.2
+        reference = [float(np.sum((render(h, 64, 10 + s) - render(-h, 64, 20 + s)) * weights)) / (2 * h)
                      for s in range(6)]
     finally:
         compiled.set(NAME, [0.0])
