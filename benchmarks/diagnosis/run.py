@@ -2,11 +2,12 @@
 ``abs.diagnosis.diagnose`` on the effect-free scene file, and report verdicts, holdout RMSE and
 recovered parameters against the truth.
 
-    python3 benchmarks/diagnosis/run.py                  # quick default (see cases.QUICK)
-    python3 benchmarks/diagnosis/run.py --cases all --width 64 --height 48
+    python3 benchmarks/diagnosis/run.py                  # quick default (see cases.QUICK), 48x36
+    python3 benchmarks/diagnosis/run.py --cases all --width 160 --height 120 --views 5 \
+        --results benchmarks/results/diagnosis.json      # the proof's resolution
 
-Writes ``benchmarks/results/diagnosis.json`` (after every case: an interrupted run resumes, skipping
-finished cases) and ``benchmarks/results/diagnosis.md``.
+Writes ``--results`` (default ``benchmarks/results/diagnosis_48x36.json``; after every case: an
+interrupted run resumes, skipping finished cases) and the same name with ``.md``.
 """
 
 from __future__ import annotations
@@ -156,7 +157,7 @@ def main(argv=None) -> int:
     p.add_argument("--iterations", type=int, default=8)
     p.add_argument("--refinement", type=int, default=2)
     p.add_argument("--work", type=Path, default=Path("out/diagnosis-benchmark"))
-    p.add_argument("--results", type=Path, default=RESULTS / "diagnosis.json")
+    p.add_argument("--results", type=Path, default=RESULTS / "diagnosis_48x36.json")
     p.add_argument("--merge", type=Path, nargs="*", default=None,
                    help="combine the rows of these result files (runs split over processes) into --results")
     args = p.parse_args(argv)

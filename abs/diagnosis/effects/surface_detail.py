@@ -29,7 +29,7 @@ class SurfaceDetail(GlassField):
     field = "normal_smoothing"
     null = 0.0
     # Measured on the suite's noisy-mesh case at 160x120 (80x60 fitted; truth: the clean mesh,
-    # whose best amount at 128 spp lies near 1): at 8 spp the fit reached 0.71, and the two
+    # whose best amount at 128 spp lies near 1): at 8 spp the fit reached about 0.7, and the two
     # Gauss-Newton steps of the refinement, from noisy columns, walked it back to 0.40; at 4x the
     # samples it ends at 0.79 with or without them.
     fit_spp_factor = 4
