@@ -210,6 +210,33 @@ def test_null_capture_gives_an_empty_verdict(diagnosis_scene, tmp_path):
 
 
 @pytest.mark.slow
+def test_a_trial_fitted_at_more_samples_is_compared_with_a_control_fitted_so_too(
+        diagnosis_scene, tmp_path, monkeypatch):
+    """An effect whose fits need more samples (``fit_spp_factor``) fits the baseline's parameters
+    at those samples too; its control must be refitted with them, or the better-converged
+    baseline counts as the effect's gain. Here stray light is made to need 2x: found as before,
+    against a control fitted at 2x, whose holdout error is the comparison's reference."""
+    from abs.diagnosis import diagnose
+    from abs.diagnosis.effects import effect
+    from abs.fitting import FitSettings
+
+    monkeypatch.setattr(type(effect("stray_light")), "fit_spp_factor", 2)
+    capture = _capture(diagnosis_scene, tmp_path, {"sensor.stray_light": [0.04, 0.04, 0.05]})
+    settings = FitSettings(spp=8, downsample=1, max_iterations=6, refinement_steps=2, eval_spp=32)
+    result = diagnose(diagnosis_scene, capture, settings, max_effects=1,
+                      only=["stray_light", "absorption"])
+    assert result.verdict == ["stray_light"], result.verdict
+    (round_,) = result.rounds
+    (matched,) = round_.matched_controls.values()
+    assert [c.candidates for c in (round_.control, matched)] == [(), ()]
+    assert list(round_.matched_controls)[0].spp == 16
+    finding = result.findings[0]
+    assert finding.evidence["fit_settings"] == {"spp": 16, "downsample": 1, "refinement_steps": 2}
+    assert finding.comparison.holdout_rmse_before == pytest.approx(matched.rmse("holdout"), rel=1e-6)
+    assert finding.comparison.holdout_rmse_after < finding.comparison.holdout_rmse_before
+
+
+@pytest.mark.slow
 def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_scene, tmp_path,
                                                                     monkeypatch):
     """Roughness changes images only to second order at 0, so the score test is blind to it; the

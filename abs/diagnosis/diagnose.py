@@ -9,8 +9,9 @@ improve (``abs diagnose``).
 4. **Select** (:mod:`.select`): fit the strongest candidates (predicted BIC gain > 0) fully
    (the best few of the score test and the best of the short fit: their statistics differ in
    scale),
-   with the current model refitted alongside as the control; accept the best one that improves
-   the holdout views beyond noise and that BIC prefers. Repeat for another effect on top.
+   with the current model refitted alongside as the control, with each trial's own fit settings;
+   accept the best one that improves the holdout views beyond noise and that BIC prefers.
+   Repeat for another effect on top.
 5. **Guard**: with two effects accepted, refit without the earlier one; if the later one now does
    its work alone (the earlier one no longer improves holdout and BIC), the earlier one was
    soaking up the later one's signature and is dropped.
@@ -38,7 +39,7 @@ from abs.diagnosis.effects import Candidate, effect, effects
 from abs.diagnosis.localise import Region, ResidualMap, breakdown, find_regions, residual_maps
 from abs.diagnosis.model import extend_scene
 from abs.diagnosis.score import CandidateScore, score_candidates
-from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model
+from abs.diagnosis.select import Comparison, ModelFit, compare, fit_model, model_settings
 from abs.errors import InputError, read_json
 from abs.fitting import FitSettings
 from abs.runs.files import write_json
@@ -51,11 +52,27 @@ DEFAULT_SETTINGS = FitSettings(spp=16, downsample=2, max_iterations=10, refineme
 
 @dataclass
 class Round:
-    """One search for a further effect: scores, the control refit and the full trial fits."""
+    """One search for a further effect: scores, the control refits and the full trial fits.
+
+    Attributes
+    ----------
+    control : ModelFit
+        The current model refitted with its own settings: the refit scatter, and the reference
+        of trials fitted with the same settings.
+    matched_controls : dict
+        The current model refitted with the settings of a trial that needs others (more samples,
+        full resolution; :func:`~abs.diagnosis.select.model_settings`), keyed by those settings:
+        that trial's reference.
+    """
 
     scores: list[CandidateScore]
     control: ModelFit | None = None
     trials: list[tuple[CandidateScore, ModelFit, Comparison]] = field(default_factory=list)
+    matched_controls: dict = field(default_factory=dict)
+
+    def reference(self, trial: ModelFit, settings: FitSettings) -> ModelFit:
+        """The control fitted with ``trial``'s settings."""
+        return self.matched_controls.get(model_settings(settings, trial.candidates), self.control)
 
 
 @dataclass
@@ -140,13 +157,17 @@ def _shifts(reference: ModelFit, trial: ModelFit) -> list[Shift]:
 
 
 def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, capture,
-             round_index: int, reference: ModelFit) -> Finding:
+             round_index: int, reference: ModelFit, settings: FitSettings) -> Finding:
     c = score.candidate
+    used = model_settings(settings, trial.candidates)
     stderr = trial.result.vector.split(trial.result.uncertainty.stderr)
     evidence = {"target": c.target, "round": round_index + 1, "score": round(score.statistic, 3),
                 "score_method": score.method, "dof": score.dof,
                 "predicted_bic_gain": round(score.predicted_bic_gain, 3),
                 **comparison.to_json(),
+                # The trial's and its control's (the same: see Round.matched_controls).
+                "fit_settings": {"spp": used.spp, "downsample": used.downsample,
+                                 "refinement_steps": used.refinement_steps},
                 "train_rmse_after": trial.rmse("train"),
                 "stderr": {p: [None if not np.isfinite(s) else float(s) for s in stderr[p]]
                            for p in c.parameters if p in stderr}}
@@ -293,21 +314,32 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         step(f"round {r + 1}: control refit")
         round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
                                    work / f"round{r + 1}_control.toml", resume)
+        # The scatter of a refit with unchanged settings: a matched control's move also holds
+        # what its other settings converge better.
         scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
         for i, s in enumerate(eligible):
             if i and _clear_winner(round_.trials[0], s):
                 continue
             c = s.candidate
+            extended = current.candidates + (c,)
+            own = model_settings(settings, extended)
+            if own != model_settings(settings, current.candidates) and own not in round_.matched_controls:
+                step(f"round {r + 1}: control refit with {c.label}'s settings")
+                round_.matched_controls[own] = fit_model(
+                    scene, capture, current.candidates, current.values, settings,
+                    work / f"round{r + 1}_control_as_{c.effect}_{c.target}.toml", resume,
+                    settings_of=extended)
             step(f"round {r + 1}: fitting {c.label}")
-            trial = fit_model(scene, capture, current.candidates + (c,),
-                              {**current.values, **s.start}, settings,
+            trial = fit_model(scene, capture, extended, {**current.values, **s.start}, settings,
                               work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume)
-            round_.trials.append((s, trial, compare(round_.control, trial, scatter, capture, settings)))
+            round_.trials.append((s, trial, compare(round_.reference(trial, settings), trial,
+                                                    scatter, capture, settings)))
         passed = [t for t in round_.trials if t[2].accepted]
         if not passed:
             break
         s, trial, comparison = min(passed, key=lambda t: t[2].delta_bic)
-        findings.append(_finding(s, trial, comparison, capture, r, round_.control))
+        findings.append(_finding(s, trial, comparison, capture, r,
+                                 round_.reference(trial, settings), settings))
         accepted.append(s.candidate)
         current = trial
 
@@ -318,9 +350,10 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             step(f"refit without {f.candidate.label}")
             others = tuple(c for c in current.candidates if c != f.candidate)
             start = {n: v for n, v in current.values.items() if n not in f.candidate.parameters}
+            # Fitted with the full model's settings, so the two compare like control and trial.
             reduced = fit_model(scene, capture, others, start, settings,
                                 work / f"without_{f.candidate.effect}_{f.candidate.target}.toml",
-                                resume)
+                                resume, settings_of=current.candidates)
             check = compare(reduced, current, scatter, capture, settings)
             f.evidence["still_needed"] = check.to_json()
             if not check.accepted:
