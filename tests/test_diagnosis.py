@@ -236,6 +236,23 @@ def test_a_trial_fitted_at_more_samples_is_compared_with_a_control_fitted_so_too
     assert finding.comparison.holdout_rmse_after < finding.comparison.holdout_rmse_before
 
 
+def test_a_better_converged_control_becomes_the_final_model():
+    """No trial accepted: a control refitted with a trial's settings (more samples) that fits the
+    training views better than the current fit is kept as the final model; the plain control
+    (same settings, refit scatter only) is not a candidate."""
+    from types import SimpleNamespace
+
+    from abs.diagnosis.diagnose import Round, _best_refit
+
+    def fit(train):
+        return SimpleNamespace(rmse=lambda split: train)
+
+    current, plain, better = fit(0.050), fit(0.010), fit(0.040)
+    round_ = Round([], control=plain, matched_controls={"8x": better, "4x": fit(0.055)})
+    assert _best_refit(current, round_) is better
+    assert _best_refit(current, Round([], control=plain)) is current
+
+
 @pytest.mark.slow
 def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_scene, tmp_path,
                                                                     monkeypatch):

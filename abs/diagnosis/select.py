@@ -51,6 +51,8 @@ class ModelFit:
     scene: object
     result: FitResult
     held: dict[str, np.ndarray] = field(default_factory=dict)
+    #: The settings it was fitted with (:func:`model_settings`).
+    settings: FitSettings | None = None
 
     @property
     def values(self) -> dict[str, np.ndarray]:
@@ -127,7 +129,7 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     state = _saved_state(folder, identity) if resume else None
     result = fit(extended, capture, names, settings, initial=initial, resume=state,
                  on_iteration=lambda s: save_checkpoint(folder, identity, s.to_dict()))
-    return ModelFit(tuple(candidates), extended, result, held)
+    return ModelFit(tuple(candidates), extended, result, held, settings)
 
 
 def _saved_state(folder: Path, identity: dict) -> OptimizerState | None:

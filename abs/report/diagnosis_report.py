@@ -162,8 +162,9 @@ def write_diagnosis_report(folder: str | Path, diagnosis) -> Path:
         parts.append(html.figure("candidates.png", "first round: predicted BIC gain per candidate "
                                  "(green: accepted; blue: fitted fully; grey: not worth a fit)"))
     parts.append("<p>Candidates with a positive predicted BIC gain are fitted fully, next to a "
-                 "control refit of the current model; one is accepted only if the holdout RMSE "
-                 "drops beyond noise and BIC prefers it.</p>" + _trials_table(diagnosis.rounds))
+                 "control refit of the current model with the same fit settings (an effect fitted "
+                 "at more samples or full resolution gets a control refitted so too); one is "
+                 "accepted only if the holdout RMSE drops beyond noise and BIC prefers it.</p>" + _trials_table(diagnosis.rounds))
     sections.append(html.section("Candidates and why the winner wins", *parts))
 
     views = [ReportView(v.name, v.holdout, v.photograph, v.after,
