@@ -64,6 +64,23 @@ def test_levenberg_marquardt_solves_least_squares():
     assert seen == list(range(1, len(seen) + 1)) and len(seen) < 20
 
 
+def test_levenberg_marquardt_treats_a_non_finite_trial_as_a_failed_step():
+    """A trial point whose renders are not finite (NaN) is rejected and the damping grows; the
+    fit still reaches the solution, which lies where the renders are finite."""
+    A, y, _ = _linear_problem()
+    exact = np.linalg.lstsq(A, y, rcond=None)[0]
+
+    def evaluate(z, it):
+        r = A @ z - y
+        if it == 2:  # the first trial step renders NaN
+            r = np.full_like(r, np.nan)
+        return (r, A), (r, A), 0.0
+
+    state = levenberg_marquardt(evaluate, OptimizerState("lm", 0, np.zeros(3)), 30)
+    assert np.allclose(state.z, exact, atol=1e-6)
+    assert [h.get("non_finite", False) for h in state.history][:2] == [False, True]
+
+
 def test_levenberg_marquardt_has_no_bias_from_noise_that_depends_on_the_parameters():
     """Renders whose Monte-Carlo noise grows with the parameter (a brighter glass is noisier):
     least squares on one fixed-seed render prefers the darker, less noisy value; the two-seed

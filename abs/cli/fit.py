@@ -133,7 +133,8 @@ def run(args) -> int:
         save_checkpoint(out, identity, state.to_dict())
         bar.total = max(bar.total, state.iteration)
         bar.update(state.iteration - bar.n)
-        bar.set_postfix(rmse=f"{state.history[-1]['loss']:.4g}")
+        loss = state.history[-1]["loss"]  # None: a trial whose renders were not finite
+        bar.set_postfix(rmse="non-finite trial" if loss is None else f"{loss:.4g}")
 
     result = fit(scene, args.capture, names, settings, initial=initial, resume=resume, on_iteration=on_iteration,
                  truth=read_truth(args.capture, names or scene.fit_parameters))

@@ -225,7 +225,9 @@ def _fit_start(scene, capture, names, settings: SampleSettings,
     from abs.fitting import FitSettings, fit
 
     def on_iteration(state) -> None:
-        stage(f"starting fit, iteration {state.iteration} (RMSE {state.history[-1]['loss']:.4g})")
+        loss = state.history[-1]["loss"]  # None: a trial whose renders were not finite
+        stage(f"starting fit, iteration {state.iteration} "
+              f"(RMSE {'of a non-finite trial' if loss is None else format(loss, '.4g')})")
 
     result = fit(scene, capture, names, FitSettings(
         spp=settings.spp, downsample=settings.downsample, clamp=settings.clamp,
