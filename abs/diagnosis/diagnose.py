@@ -71,9 +71,9 @@ class Round:
     trials: list[tuple[CandidateScore, ModelFit, Comparison]] = field(default_factory=list)
     matched_controls: dict = field(default_factory=dict)
 
-    def reference(self, trial: ModelFit, settings: FitSettings) -> ModelFit:
+    def reference(self, trial: ModelFit) -> ModelFit:
         """The control fitted with ``trial``'s settings."""
-        return self.matched_controls.get(model_settings(settings, trial.candidates), self.control)
+        return self.matched_controls.get(trial.settings, self.control)
 
 
 @dataclass
@@ -158,9 +158,9 @@ def _shifts(reference: ModelFit, trial: ModelFit) -> list[Shift]:
 
 
 def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, capture,
-             round_index: int, reference: ModelFit, settings: FitSettings) -> Finding:
+             round_index: int, reference: ModelFit) -> Finding:
     c = score.candidate
-    used = model_settings(settings, trial.candidates)
+    used = trial.settings
     stderr = trial.result.vector.split(trial.result.uncertainty.stderr)
     evidence = {"target": c.target, "round": round_index + 1, "score": round(score.statistic, 3),
                 "score_method": score.method, "dof": score.dof,
@@ -337,7 +337,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             c = s.candidate
             extended = current.candidates + (c,)
             own = model_settings(settings, extended)
-            if own != model_settings(settings, current.candidates) and own not in round_.matched_controls:
+            if own != round_.control.settings and own not in round_.matched_controls:
                 step(f"round {r + 1}: control refit with {c.label}'s settings")
                 round_.matched_controls[own] = fit_model(
                     scene, capture, current.candidates, current.values, settings,
@@ -346,8 +346,8 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             step(f"round {r + 1}: fitting {c.label}")
             trial = fit_model(scene, capture, extended, {**current.values, **s.start}, settings,
                               work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume)
-            round_.trials.append((s, trial, compare(round_.reference(trial, settings), trial,
-                                                    scatter, capture, settings)))
+            round_.trials.append((s, trial, compare(round_.reference(trial), trial, scatter,
+                                                    capture, settings)))
         passed = [t for t in round_.trials if t[2].accepted]
         if not passed:
             adopted = _best_refit(current, round_)
@@ -360,8 +360,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                 current = adopted
             break
         s, trial, comparison = min(passed, key=lambda t: t[2].delta_bic)
-        findings.append(_finding(s, trial, comparison, capture, r,
-                                 round_.reference(trial, settings), settings))
+        findings.append(_finding(s, trial, comparison, capture, r, round_.reference(trial)))
         accepted.append(s.candidate)
         current = trial
 
