@@ -287,6 +287,30 @@ def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_sc
     assert again.predicted_bic_gain == statistics["smooth"] and set(again.start) == set(score.start)
 
 
+def test_the_short_fit_scan_stops_once_larger_amounts_fit_worse():
+    """The crossed error of a linearly responding image is (a - t)^2 c + const in the amount a:
+    an absent effect (t = 0) stops after two amounts, a present one is scanned past its best
+    amount, and a large one (beyond the grid) is scanned to the end."""
+    from abs.diagnosis.score import PROBE_SCALES, _scan
+
+    def scan(truth, noise=()):
+        tried = []
+
+        def error(scale):
+            tried.append(scale)
+            return 0, (scale - truth) ** 2 + dict(noise).get(scale, 0.0), None
+
+        _scan(error, truth ** 2)
+        return tried
+
+    assert scan(0.0) == [0.25, 0.5]
+    assert scan(1.0) == [0.25, 0.5, 1.0, 2.0, 4.0]
+    assert scan(0.3) == [0.25, 0.5, 1.0]
+    assert scan(10.0) == list(PROBE_SCALES)
+    # One noisy rise does not end the scan: the error must rise twice in a row.
+    assert scan(1.0, {0.5: 0.6}) == [0.25, 0.5, 1.0, 2.0, 4.0]
+
+
 def test_saved_short_fits_survive_a_restart_only_when_resuming(tmp_path):
     from abs.diagnosis.diagnose import _SavedShortFits
     from abs.errors import InputError
@@ -344,7 +368,10 @@ def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
     """A 4 mm, 2.3 degree displacement of a 6 cm box moves its outline by about half a pixel at
     48x36: the pose score (chi-square with 6 degrees of freedom when the box is in place) must
     predict a BIC gain for the moved box and none for the box in place. Silhouette derivatives
-    come from edge samples; at too few samples both scores drown in render noise."""
+    come from edge samples; at too few samples both scores drown in render noise: the pose's
+    score_spp_factor (16) is set for the suite's 160x120, whose edges hold 3.3x the pixels, so at
+    48x36 the fits' samples are raised to 32 (512 per pixel in the score); at 8 both gains are
+    below zero (-32 and -27)."""
     from conftest import use_diagnosis_suite
 
     from abs.diagnosis.score import score_candidates
@@ -359,7 +386,7 @@ def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
     (candidate,) = effects()["pose"].candidates(scene, compile_scene(scene))
     assert candidate.target == "box"
     extended = extend_scene(scene, (candidate,), {}, tmp_path / "extended.toml")
-    settings = FitSettings(spp=8, downsample=2)
+    settings = FitSettings(spp=32, downsample=2)
     gains = {}
     for label, pose in (("moved", [0.004, 0.0, -0.003, 0.0, 0.04, 0.0]), ("in place", None)):
         truth = scene if pose is None else load_scene(

@@ -18,8 +18,12 @@ class Pose(Effect):
     full_resolution = True  # silhouette edge sampling needs undownsampled cameras
     # Silhouette derivatives come from the few samples that land on an edge: at 4x the fits'
     # samples the score of a 4 mm, 2 degree displacement (11-27) could not be told from a
-    # correctly placed box's (12-16); at 64x they are 190-311 against 8-10 (box scene, 48x36).
-    score_spp_factor = 64
+    # correctly placed box's (12-16) at 48x36. At the suite's 160x120 the edges hold 3.3x the
+    # pixels: at 16x the 4 mm case scores 3119-4486 (two seeds; 7880 at 64x, 1616 at 8x) and the
+    # correctly placed box 20 (18 at 64x), against the 74 that six scalars must clear. 64x cost
+    # 295 s of a 555-s scoring round there (forward-mode renders of six columns at full
+    # resolution); 16x costs a quarter.
+    score_spp_factor = 16
     # The same noise makes the Gauss-Newton refinement after Levenberg-Marquardt jump: on the
     # suite's box-pose-4mm case at 160x120 (8 spp, full resolution) the round-2 control refit,
     # started from the round-1 fit (holdout RMSE 0.0497), took two refinement steps clipped at the
