@@ -477,7 +477,7 @@ def levenberg_marquardt(evaluate: Callable[[np.ndarray, int], tuple],
             break
         predicted = -float(g @ step + 0.5 * step @ H @ step)
         f_trial, g_trial, curvature_trial, trial = at(z + step)
-        ratio = (f - f_trial) / predicted if predicted > 0 and np.isfinite(f_trial) else -np.inf
+        ratio = (f - f_trial) / predicted if predicted > 0 else -np.inf  # f_trial = inf: -inf
         if ratio > 1e-3:
             z, f, g, (H, scale) = trial, f_trial, g_trial, curvature_trial
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
