@@ -258,33 +258,44 @@ def test_short_fit_sees_an_effect_whose_derivative_vanishes_at_null(diagnosis_sc
                                                                     monkeypatch):
     """Roughness changes images only to second order at 0, so the score test is blind to it; the
     short fit from a probe value must score rough glass far above smooth glass."""
+    from abs.diagnosis import score as score_module
     from abs.diagnosis.score import score_candidates
     from abs.fitting import FitSettings
 
     settings = FitSettings(spp=8, downsample=1, max_iterations=4, refinement_steps=1, eval_spp=32)
     scene = load_scene(diagnosis_scene)
     compiled = compile_scene(scene)
-    (candidate,) = effects()["surface_roughness"].candidates(scene, compiled)
-    extended = extend_scene(scene, (candidate,), {}, tmp_path / "extended.toml")
-    statistics, saved = {}, {}
+    (rough,) = effects()["surface_roughness"].candidates(scene, compiled)
+    (offset,) = effects()["stray_light"].candidates(scene, compiled)
+    extended = extend_scene(scene, (rough, offset), {}, tmp_path / "extended.toml")
+    scans, scan = [], score_module._scan
+    monkeypatch.setattr(score_module, "_scan", lambda *a: scans.append(scan(*a)) or scans[-1])
+    statistics, saved, scores = {}, {}, {}
     for label, truth in (("rough", {"glass.roughness": [0.15]}), ("smooth", {})):
         capture = _capture(diagnosis_scene, tmp_path / label, truth)
-        (score,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings,
-                                    saved=saved)
-        assert score.method == "short fit"
-        statistics[label] = score.predicted_bic_gain
+        scores[label] = score_candidates(extended, capture, ["environment.scale"], [rough, offset],
+                                         settings, saved=saved)
+        assert [s.method for s in scores[label]] == ["short fit", "score test"]
+        statistics[label] = scores[label][0].predicted_bic_gain
     assert statistics["rough"] > 0 > statistics["smooth"], statistics
+    # Smooth glass fits worse at once: the scan stops after two amounts (four renders).
+    assert len(scans[1]) == 2, [len(g) for g in scans]
 
-    # Saved short fits (what a resumed diagnosis keeps) are reused, one per capture, not redone.
-    assert len(saved) == 2
+    # Saved scores (what a resumed diagnosis keeps) are reused, one short fit and one score test
+    # per capture, not redone, to the last bit.
+    assert len(saved) == 4
 
     def no_render(*args):
-        raise AssertionError("a saved short fit was rendered again")
+        raise AssertionError("a saved score was rendered again")
 
-    monkeypatch.setattr("abs.diagnosis.score._short_fit", no_render)
-    (again,) = score_candidates(extended, capture, ["environment.scale"], [candidate], settings,
-                                saved=json.loads(json.dumps(saved)))  # through JSON, as on disk
-    assert again.predicted_bic_gain == statistics["smooth"] and set(again.start) == set(score.start)
+    monkeypatch.setattr(score_module, "_short_fit", no_render)
+    monkeypatch.setattr(score_module, "render_problem", no_render)
+    again = score_candidates(extended, capture, ["environment.scale"], [rough, offset], settings,
+                             saved=json.loads(json.dumps(saved)))  # through JSON, as on disk
+    for before, after in zip(scores["smooth"], again):
+        assert (after.method, after.statistic, set(after.start)) == (
+            before.method, before.statistic, set(before.start))
+        assert all(np.array_equal(after.start[n], np.ravel(before.start[n])) for n in after.start)
 
 
 def test_the_short_fit_scan_stops_once_larger_amounts_fit_worse():
@@ -311,17 +322,17 @@ def test_the_short_fit_scan_stops_once_larger_amounts_fit_worse():
     assert scan(1.0, {0.5: 0.6}) == [0.25, 0.5, 1.0, 2.0, 4.0]
 
 
-def test_saved_short_fits_survive_a_restart_only_when_resuming(tmp_path):
-    from abs.diagnosis.diagnose import _SavedShortFits
+def test_saved_scores_survive_a_restart_only_when_resuming(tmp_path):
+    from abs.diagnosis.diagnose import _SavedScores
     from abs.errors import InputError
 
-    path = tmp_path / "short_fits.json"
-    _SavedShortFits(path, resume=False)["k"] = {"statistic": 1.5, "start": {"a.b": [0.1]}}
-    assert _SavedShortFits(path, resume=True) == {"k": {"statistic": 1.5, "start": {"a.b": [0.1]}}}
-    assert _SavedShortFits(path, resume=False) == {}
+    path = tmp_path / "scores.json"
+    _SavedScores(path, resume=False)["k"] = {"statistic": 1.5, "start": {"a.b": [0.1]}}
+    assert _SavedScores(path, resume=True) == {"k": {"statistic": 1.5, "start": {"a.b": [0.1]}}}
+    assert _SavedScores(path, resume=False) == {}
     path.write_text("{broken")
-    with pytest.raises(InputError, match="short_fits.json"):
-        _SavedShortFits(path, resume=True)
+    with pytest.raises(InputError, match="scores.json"):
+        _SavedScores(path, resume=True)
 
 
 def test_a_short_fit_candidate_is_fitted_even_behind_stronger_score_test_candidates():

@@ -225,15 +225,16 @@ def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
     return sorted(chosen, key=lambda s: -s.predicted_bic_gain)
 
 
-class _SavedShortFits(dict):
-    """Short-fit results (:func:`~abs.diagnosis.score.score_candidates`), written to ``path``
-    whenever one is added, so a resumed diagnosis reuses them like its checkpointed fits."""
+class _SavedScores(dict):
+    """Score tests' and short fits' results (:func:`~abs.diagnosis.score.score_candidates`),
+    written to ``path`` whenever one is added, so a resumed diagnosis reuses them like its
+    checkpointed fits."""
 
     def __init__(self, path: Path, resume: bool):
         super().__init__()
         self.path = path
         if resume and path.exists():
-            self.update(read_json(path, what="short-fit record", hint="delete it to start over"))
+            self.update(read_json(path, what="saved scores", hint="delete it to start over"))
 
     def __setitem__(self, key: str, value: dict) -> None:
         super().__setitem__(key, value)
@@ -270,9 +271,9 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         Continue an interrupted diagnosis in the same ``work_dir``: every model fit is
         checkpointed there after each iteration, and a fit that finished (or was interrupted)
         before is continued from its checkpoint rather than started again
-        (:func:`~abs.diagnosis.select.fit_model`); short fits are kept in ``short_fits.json``
-        and reused, score tests (one Jacobian each) are recomputed. Renders are seeded, so a
-        resumed diagnosis reaches the same verdict.
+        (:func:`~abs.diagnosis.select.fit_model`); score tests and short fits are kept in
+        ``scores.json`` and reused. Renders are seeded, so a resumed diagnosis reaches the same
+        verdict, and a finished fit is not run again.
     """
     from abs.model import build_model
     from abs.render import Camera
@@ -297,7 +298,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
         work_dir = tmp.name
     work = Path(work_dir)
 
-    short_fits = _SavedShortFits(work / "short_fits.json", resume)
+    saved_scores = _SavedScores(work / "scores.json", resume)
     step("baseline fit")
     baseline = fit_model(scene, capture, (), {}, settings, work / "baseline.toml", resume)
     step("locating the residual")
@@ -318,7 +319,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                                 work / f"round{r + 1}_scores.toml")
         scores = score_candidates(extended, capture, current.result.vector.names, remaining,
                                   settings, any(effect(c.effect).full_resolution
-                                                for c in current.candidates), short_fits)
+                                                for c in current.candidates), saved_scores)
         scores.sort(key=lambda s: -s.predicted_bic_gain)
         round_ = Round(scores)
         rounds.append(round_)

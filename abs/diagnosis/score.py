@@ -165,9 +165,12 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
         The current model holds an effect that needs full resolution (an accepted pose): every
         candidate is then scored without downsampling.
     saved : mutable mapping, optional
-        Short-fit results by a key of everything they depend on (scene file, capture, candidate,
-        settings): found ones are reused, new ones added. The diagnosis passes a file-backed
-        mapping, so a resumed run does not repeat them.
+        Scores by a key of everything they depend on (scene file, capture, candidates, settings):
+        found ones are reused, new ones added. The diagnosis passes a file-backed mapping, so a
+        resumed run does not repeat them. A score test is saved too, though it is one Jacobian:
+        recomputed, its step (a trial's start) differs in the last bits (gradients accumulate
+        atomically, in an order that depends on thread scheduling), so the trial's checkpoint
+        would no longer match and a finished fit would run again.
     """
     scores = {}
     groups: dict[int, list[Candidate]] = {}
@@ -176,22 +179,23 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
         if e.zero_null_derivative:
             used = (replace(settings, downsample=1) if e.full_resolution or full_resolution
                     else settings)
-            key = _short_fit_key(scene, capture, c, used) if saved is not None else None
+            key = _saved_key(scene, capture, "short fit", c.parameters, [c], used, saved)
             if key is not None and key in saved:
                 scores[c] = _restored(c, saved[key])
                 continue
             scores[c] = _short_fit(scene, capture, c, used)
             if key is not None:
-                s = scores[c]
-                saved[key] = {"statistic": float(s.statistic), "dof": s.dof,
-                              "n_residuals": s.n_residuals,
-                              "start": {n: np.asarray(v, float).ravel().tolist()
-                                        for n, v in s.start.items()}}
+                saved[key] = _record(scores[c])
         else:
             factor = 1 if e.full_resolution or full_resolution else settings.downsample
             groups.setdefault(factor, []).append(c)
     for factor, group in groups.items():
         names = tuple(base_parameters) + tuple(p for c in group for p in c.parameters)
+        key = _saved_key(scene, capture, "score test", names, group,
+                         replace(settings, downsample=factor), saved)
+        if key is not None and key in saved:
+            scores.update({c: _restored(c, saved[key][i]) for i, c in enumerate(group)})
+            continue
         compiled, vector, theta0, problem = render_problem(scene, capture, names, False, factor, settings.clamp)
         # The test's power grows with the samples (S scales as 1 / sigma^2, mostly render
         # noise) and it costs one Jacobian, so it affords more than a fit's iteration.
@@ -217,22 +221,32 @@ def score_candidates(scene, capture, base_parameters, candidates: list[Candidate
             start = _inside(sub, theta0[cols] + step, slice(base.size, cols.size))
             scores[c] = CandidateScore(c, max(statistic, 0.0), own.size, m, "score test",
                                        sub.split(start))
+        if key is not None:
+            saved[key] = [_record(scores[c]) for c in group]
     return [scores[c] for c in candidates]
 
 
-def _short_fit_key(scene, capture, candidate: Candidate, settings: FitSettings) -> str | None:
-    """A digest of what a short fit's result depends on (``None``: the scene has no file)."""
+def _saved_key(scene, capture, method: str, names, group: list[Candidate], settings: FitSettings,
+               saved: MutableMapping | None) -> str | None:
+    """A digest of what the scores of ``group`` by ``method`` depend on, ``names`` the parameters
+    that enter them (``None``: nothing is saved, or the scene has no file)."""
     source = getattr(scene, "source", None)
-    if source is None or not Path(source).is_file():
+    if saved is None or source is None or not Path(source).is_file():
         return None
-    what = {**model_identity(scene, capture, candidate.parameters, {}, settings),
-            "candidate": [candidate.effect, candidate.target]}
+    what = {**model_identity(scene, capture, list(names), {}, settings), "method": method,
+            "candidates": [[c.effect, c.target] for c in group]}
     return digest(what, 24)
+
+
+def _record(score: CandidateScore) -> dict:
+    return {"statistic": float(score.statistic), "dof": score.dof,
+            "n_residuals": score.n_residuals, "method": score.method,
+            "start": {n: np.asarray(v, float).ravel().tolist() for n, v in score.start.items()}}
 
 
 def _restored(candidate: Candidate, entry: dict) -> CandidateScore:
     return CandidateScore(candidate, float(entry["statistic"]), int(entry["dof"]),
-                          int(entry["n_residuals"]), "short fit",
+                          int(entry["n_residuals"]), entry["method"],
                           {n: np.asarray(v, float) for n, v in entry["start"].items()})
 
 

@@ -64,7 +64,8 @@ def run_case(case, root: Path, args) -> dict:
                            refinement_steps=args.refinement, eval_spp=args.eval_spp)
     t0 = time.perf_counter()
     result = diagnose(scene_path, folder / "capture", settings, work_dir=folder / "models",
-                      on_step=lambda m: print(f"  {case.name}: {m}", flush=True), resume=resumed)
+                      on_step=lambda m: print(f"  {case.name} [{time.perf_counter() - t0:6.0f} s]: {m}",
+                                              flush=True), resume=resumed)
     wall = time.perf_counter() - t0
     out = result.to_json()
     recovered = {p: v for f in out["findings"] for p, v in f["parameters"].items()}
