@@ -409,3 +409,44 @@ def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
         assert score.method == "score test" and score.dof == 6
         gains[label] = score.predicted_bic_gain
     assert gains["moved"] > 0 > gains["in place"], gains
+
+
+def test_a_settled_pose_is_held_and_no_longer_sets_the_fits_settings(tmp_path, monkeypatch):
+    """An accepted pose (``held_once_accepted``) is held at its value in later fits, which then
+    run at the diagnosis's own settings: not at full resolution, twice the samples and without
+    the refinement, as fits of the pose itself do."""
+    from conftest import use_diagnosis_suite
+
+    from types import SimpleNamespace
+
+    from abs.diagnosis import select
+    from abs.diagnosis.effects import Candidate
+    from abs.fitting import FitSettings
+
+    use_diagnosis_suite()
+    from cases import build_scene
+
+    scene = load_scene(build_scene(tmp_path / "box", "box"))
+    pose = Candidate("pose", "box", ("box.pose",))
+    lobe = Candidate("cloth_anisotropy", "paint", ("paint.anisotropy",))
+    calls = []
+    monkeypatch.setattr(select, "fit", lambda scene, capture, names, settings, **kw:
+                        calls.append((names, settings, kw["initial"])) or SimpleNamespace())
+    settings = FitSettings(spp=8, downsample=2, refinement_steps=2)
+    start = {"box.pose": np.full(6, 0.01), "environment.scale": np.ones(1)}
+    fitted = select.fit_model(scene, tmp_path, (pose,), start, settings, tmp_path / "a.toml")
+    held = select.fit_model(scene, tmp_path, (pose,), start, settings, tmp_path / "b.toml",
+                            settled=(pose,))
+    both = select.fit_model(scene, tmp_path, (pose, lobe), start, settings, tmp_path / "c.toml",
+                            settled=(pose,))
+    (names, used, initial), (held_names, held_used, _), (both_names, both_used, _) = calls
+    assert "box.pose" in names and "box.pose" in initial
+    assert (used.downsample, used.spp, used.refinement_steps) == (1, 16, 0)
+    assert "box.pose" not in held_names and held_used == settings
+    np.testing.assert_array_equal(held.held["box.pose"], start["box.pose"])
+    box = [o for o in load_scene(tmp_path / "b.toml").objects if o.name == "box"][0]
+    np.testing.assert_allclose(box.pose, 0.01)
+    # The lobe's own needs (8x the samples, no refinement) still set the fit's settings.
+    assert "paint.anisotropy" in both_names and "box.pose" not in both_names
+    assert (both_used.downsample, both_used.spp, both_used.refinement_steps) == (2, 64, 0)
+    assert not fitted.held

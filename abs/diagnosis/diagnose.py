@@ -172,8 +172,13 @@ def _finding(score: CandidateScore, trial: ModelFit, comparison: Comparison, cap
                 "train_rmse_after": trial.rmse("train"),
                 "stderr": {p: [None if not np.isfinite(s) else float(s) for s in stderr[p]]
                            for p in c.parameters if p in stderr}}
-    if trial.held:
-        evidence["held_from_short_fit"] = sorted(trial.held)
+    scanned = sorted(n for e in trial.candidates if effect(e.effect).zero_null_derivative
+                     for n in e.parameters)
+    if scanned:
+        evidence["held_from_short_fit"] = scanned
+    settled = sorted(set(trial.held) - set(scanned))
+    if settled:
+        evidence["held_from_earlier_round"] = settled
     truth = _truth(capture, c.parameters)
     if truth:
         evidence["truth"] = truth
@@ -309,17 +314,23 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             for c in e.candidates(scene, compiled)]
 
     current, rounds, findings, accepted, notes = baseline, [], [], [], []
+    current_settled: tuple = ()  # the effects held when the current model was fitted
     scatter = 0.0
     for r in range(max_effects):
         remaining = [c for c in pool if c.effect not in {a.effect for a in accepted}]
         if not remaining:
             break
         step(f"round {r + 1}: scoring {len(remaining)} candidates")
+        # Accepted effects held from here on (a pose): neither fitted nor a need of any fit.
+        settled = tuple(c for c in current.candidates if effect(c.effect).held_once_accepted)
+        fitted = [n for n in current.result.vector.names
+                  if not any(n in c.parameters for c in settled)]
         extended = extend_scene(scene, current.candidates + tuple(remaining), current.values,
                                 work / f"round{r + 1}_scores.toml")
-        scores = score_candidates(extended, capture, current.result.vector.names, remaining,
-                                  settings, any(effect(c.effect).full_resolution
-                                                for c in current.candidates), saved_scores)
+        scores = score_candidates(extended, capture, fitted, remaining, settings,
+                                  any(effect(c.effect).full_resolution
+                                      for c in current.candidates if c not in settled),
+                                  saved_scores)
         scores.sort(key=lambda s: -s.predicted_bic_gain)
         round_ = Round(scores)
         rounds.append(round_)
@@ -328,25 +339,31 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             break
         step(f"round {r + 1}: control refit")
         round_.control = fit_model(scene, capture, current.candidates, current.values, settings,
-                                   work / f"round{r + 1}_control.toml", resume)
+                                   work / f"round{r + 1}_control.toml", resume, settled=settled)
         # The scatter of a refit with unchanged settings: a matched control's move also holds
-        # what its other settings converge better.
+        # what its other settings converge better. (After a settled effect the control's
+        # settings may be plainer than the accepted fit's: its move then counts too, which can
+        # only make acceptance stricter.)
         scatter = max(scatter, abs(round_.control.rmse("holdout") - current.rmse("holdout")))
         for i, s in enumerate(eligible):
             if i and _clear_winner(round_.trials[0], s):
                 continue
             c = s.candidate
             extended = current.candidates + (c,)
-            own = model_settings(settings, extended)
+            own = model_settings(settings, tuple(e for e in extended if e not in settled))
             if own != round_.control.settings and own not in round_.matched_controls:
                 step(f"round {r + 1}: control refit with {c.label}'s settings")
                 round_.matched_controls[own] = fit_model(
                     scene, capture, current.candidates, current.values, settings,
                     work / f"round{r + 1}_control_as_{c.effect}_{c.target}.toml", resume,
-                    settings_of=extended)
+                    settings_of=extended, settled=settled)
             step(f"round {r + 1}: fitting {c.label}")
-            trial = fit_model(scene, capture, extended, {**current.values, **s.start}, settings,
-                              work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume)
+            # The score test's step moves the settled parameters too: they keep their values.
+            start = {**current.values, **s.start,
+                     **{n: current.values[n] for e in settled for n in e.parameters}}
+            trial = fit_model(scene, capture, extended, start, settings,
+                              work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume,
+                              settled=settled)
             round_.trials.append((s, trial, compare(round_.reference(trial), trial, scatter,
                                                     capture, settings)))
         passed = [t for t in round_.trials if t[2].accepted]
@@ -358,12 +375,12 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                              f"{used.spp} spp and downsample {used.downsample}: the same model "
                              f"fitted better (training RMSE {adopted.rmse('train'):.4g}, "
                              f"{current.rmse('train'):.4g} before)")
-                current = adopted
+                current, current_settled = adopted, settled
             break
         s, trial, comparison = min(passed, key=lambda t: t[2].delta_bic)
         findings.append(_finding(s, trial, comparison, capture, r, round_.reference(trial)))
         accepted.append(s.candidate)
-        current = trial
+        current, current_settled = trial, settled
 
     if len(findings) >= 2:
         # Guard: does every earlier effect still earn its place next to the later ones?
@@ -374,7 +391,8 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
             # Fitted with the full model's settings, so the two compare like control and trial.
             reduced = fit_model(scene, capture, others, start, settings,
                                 work / f"without_{f.candidate.effect}_{f.candidate.target}.toml",
-                                resume, settings_of=current.candidates)
+                                resume, settings_of=current.candidates,
+                                settled=current_settled)
             check = compare(reduced, current, scatter, capture, settings)
             f.evidence["still_needed"] = check.to_json()
             if not check.accepted:

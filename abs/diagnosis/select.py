@@ -90,12 +90,14 @@ def model_settings(settings: FitSettings, candidates: tuple[Candidate, ...]) -> 
 
 
 def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, settings: FitSettings,
-              path: Path, resume: bool = False, settings_of: tuple[Candidate, ...] | None = None
-              ) -> ModelFit:
+              path: Path, resume: bool = False, settings_of: tuple[Candidate, ...] | None = None,
+              settled: tuple[Candidate, ...] = ()) -> ModelFit:
     """Fit ``scene`` extended by ``candidates`` (its ``[fit]`` parameters and theirs) from
     ``start`` values; the extended scene file is written to ``path``.
 
-    The fit runs with :func:`model_settings` of ``settings_of`` (default: ``candidates``). A
+    The fit runs with :func:`model_settings` of ``settings_of`` (default: ``candidates``) less
+    ``settled``: accepted effects held at their ``start`` values
+    (``Effect.held_once_accepted``), whose needs were those of fitting them. A
     control compared with a model that has one more effect passes that model's candidates, so
     both fit their shared parameters alike: an effect fitted at 8x the samples also converges
     the baseline's parameters better, and a control left at the plain samples would credit that
@@ -117,12 +119,13 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     one noisy render also rewards whatever renders with less noise (rough glass lets light
     sampling reach through the interface), which pulled 0.15 to 0.35-0.45 with a worse holdout.
     """
-    held_names = {p for c in candidates if effect(c.effect).zero_null_derivative
+    held_names = {p for c in candidates if effect(c.effect).zero_null_derivative or c in settled
                   for p in c.parameters}
     held = {n: np.asarray(start[n], float) for n in held_names}
     extended = extend_scene(scene, candidates, held, path)
     names = tuple(n for n in extended.fit_parameters if n not in held)
-    settings = model_settings(settings, candidates if settings_of is None else settings_of)
+    used = candidates if settings_of is None else settings_of
+    settings = model_settings(settings, tuple(c for c in used if c not in settled))
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
     identity = model_identity(extended, capture, names, initial, settings)

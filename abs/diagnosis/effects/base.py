@@ -83,6 +83,12 @@ class Effect(ABC):
         BIC still compares the fits' training errors of shared seeds; the effect's extra
         per-sample variance can only raise its model's error there, so that test errs towards
         rejecting it.
+    held_once_accepted : bool
+        Once accepted, the effect's parameters are held at the accepted fit's values in every
+        later fit and score of the diagnosis, and their needs (``full_resolution``,
+        ``fit_spp_factor``, ``fit_refinement``) no longer set those fits' settings: for an effect
+        whose fits are costly and that later refits at the diagnosis's samples did not improve
+        (a pose: every later trial at full resolution, each with its own control).
     """
 
     name: ClassVar[str]
@@ -92,6 +98,7 @@ class Effect(ABC):
     fit_spp_factor: ClassVar[int] = 1
     fit_refinement: ClassVar[bool] = True
     crossed_comparison: ClassVar[bool] = False
+    held_once_accepted: ClassVar[bool] = False
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:
