@@ -36,9 +36,9 @@ class Pose(Effect):
     # Fits of a pose follow the fixed seeds' noise into wrong minima at the fits' samples: the
     # suite's box-pose round-1 trial (160x120, full resolution; truth 10/0/-8 mm, [0, 0.1, 0]
     # rad), refitted from its start at 8 spp, ends at 7.3/-0.1/-4.5 mm, [0.095, 0.029, 0.060]
-    # rad (holdout 0.0586), at 16 spp at 10.6/0.4/-8.6 mm, [-0.046, 0.112, -0.043] (0.0505;
-    # 0.0483 at the true pose). Eight or 32 times the silhouette's edge samples at 8 spp do not
-    # help (0.0572, 0.0581): the interior's noise misleads it, not the boundary term's.
+    # rad (holdout 0.0586), at 16 spp at 10.6/0.4/-8.6 mm, [-0.046, 0.112, -0.043] (0.0505; at
+    # 32 spp 0.0487; 0.0483 at the true pose). Eight or 32 times the silhouette's edge samples at
+    # 8 spp do not help (0.0572, 0.0581): the interior's noise misleads it, not the boundary's.
     fit_spp_factor = 2
     # Refits of an accepted pose in later rounds put every later trial at full resolution, with
     # a control at its settings, and made up most of a displaced box's diagnosis (box-pose-4mm at
