@@ -358,10 +358,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                     work / f"round{r + 1}_control_as_{c.effect}_{c.target}.toml", resume,
                     settings_of=extended, settled=settled)
             step(f"round {r + 1}: fitting {c.label}")
-            # The score test's step moves the settled parameters too: they keep their values.
-            start = {**current.values, **s.start,
-                     **{n: current.values[n] for e in settled for n in e.parameters}}
-            trial = fit_model(scene, capture, extended, start, settings,
+            trial = fit_model(scene, capture, extended, {**current.values, **s.start}, settings,
                               work / f"round{r + 1}_{c.effect}_{c.target}.toml", resume,
                               settled=settled)
             round_.trials.append((s, trial, compare(round_.reference(trial), trial, scatter,
