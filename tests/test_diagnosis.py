@@ -413,8 +413,8 @@ def test_score_test_sees_a_half_pixel_displacement_of_a_solid_object(tmp_path):
 
 def test_a_settled_pose_is_held_and_no_longer_sets_the_fits_settings(tmp_path, monkeypatch):
     """An accepted pose (``held_once_accepted``) is held at its value in later fits, which then
-    run at the diagnosis's own settings: not at full resolution, twice the samples and without
-    the refinement, as fits of the pose itself do."""
+    run at the diagnosis's own settings: not at full resolution and without the refinement, as
+    fits of the pose itself do."""
     from conftest import use_diagnosis_suite
 
     from types import SimpleNamespace
@@ -441,7 +441,7 @@ def test_a_settled_pose_is_held_and_no_longer_sets_the_fits_settings(tmp_path, m
                             settled=(pose,))
     (names, used, initial), (held_names, held_used, _), (both_names, both_used, _) = calls
     assert "box.pose" in names and "box.pose" in initial
-    assert (used.downsample, used.spp, used.refinement_steps) == (1, 16, 0)
+    assert (used.downsample, used.spp, used.refinement_steps) == (1, 8, 0)
     assert "box.pose" not in held_names and held_used == settings
     np.testing.assert_array_equal(held.held["box.pose"], start["box.pose"])
     box = [o for o in load_scene(tmp_path / "b.toml").objects if o.name == "box"][0]

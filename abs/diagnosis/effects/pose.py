@@ -33,18 +33,19 @@ class Pose(Effect):
     # refinement both fits end near the truth (pose [4.2, 0.2, -2.7] mm, [-0.009, 0.038, 0.0] rad
     # for [4, 0, -3] mm, [0, 0.04, 0]; holdout 0.0490 and 0.0485).
     fit_refinement = False
-    # Fits of a pose follow the fixed seeds' noise into wrong minima at the fits' samples: the
-    # suite's box-pose round-1 trial (160x120, full resolution; truth 10/0/-8 mm, [0, 0.1, 0]
-    # rad), refitted from its start at 8 spp, ends at 7.3/-0.1/-4.5 mm, [0.095, 0.029, 0.060]
-    # rad (holdout 0.0586), at 16 spp at 10.6/0.4/-8.6 mm, [-0.046, 0.112, -0.043] (0.0505; at
-    # 32 spp 0.0487; 0.0483 at the true pose). Eight or 32 times the silhouette's edge samples at
-    # 8 spp do not help (0.0572, 0.0581): the interior's noise misleads it, not the boundary's.
-    fit_spp_factor = 2
+    # More samples do not reliably help a pose fit out of wrong minima: the suite's box-pose
+    # round-1 trial (160x120, full resolution; truth 10/0/-8 mm, [0, 0.1, 0] rad; holdout 0.0483
+    # at the true pose), refitted from the start a 64x score test gave, reaches holdout 0.0586 at
+    # 8 spp, 0.0505 at 16 and 0.0487 at 32; from the start of the 16x score test 0.0505, 0.0582
+    # and 0.0534. Eight or 32 times the silhouette's edge samples at 8 spp do not help either
+    # (0.0572, 0.0581): where Levenberg-Marquardt ends depends on the start and the seeds, so
+    # pose fits keep the fits' samples (``fit_spp_factor`` 1).
+
     # Refits of an accepted pose in later rounds put every later trial at full resolution, with
     # a control at its settings, and made up most of a displaced box's diagnosis (box-pose-4mm at
     # 2dc918d: over 44 minutes, still in round 2). At the fits' samples they only kept the round-1
-    # minimum (box-pose) or, with the refinement, left the right one (above); a refit at 64 spp
-    # found the true pose, which the round-1 fit at 16 spp now nearly reaches.
+    # minimum (box-pose) or, with the refinement, left the right one (above); only a refit at
+    # 64 spp (with a cloth lobe's trial) found the true pose there.
     held_once_accepted = True
 
     def targets(self, scene, compiled) -> list[str]:
