@@ -415,9 +415,9 @@ def test_a_settled_pose_is_held_and_no_longer_sets_the_fits_settings(tmp_path, m
     """An accepted pose (``held_once_accepted``) is held at its value in later fits, which then
     run at the diagnosis's own settings: not at full resolution and without the refinement, as
     fits of the pose itself do."""
-    from conftest import use_diagnosis_suite
-
     from types import SimpleNamespace
+
+    from conftest import use_diagnosis_suite
 
     from abs.diagnosis import select
     from abs.diagnosis.effects import Candidate

@@ -61,7 +61,8 @@ class ModelFit:
 
     @property
     def n_scalars(self) -> int:
-        """Scalars estimated from the capture (held amounts included: a scan estimated them)."""
+        """Scalars estimated from the capture (held amounts included: a scan or an earlier
+        round estimated them)."""
         return self.result.vector.size + sum(np.size(v) for v in self.held.values())
 
     @property
