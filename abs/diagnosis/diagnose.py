@@ -11,8 +11,10 @@ improve (``abs diagnose``).
    scale),
    with the current model refitted alongside as the control, with each trial's own fit settings;
    accept the best one that improves the holdout views beyond noise and that BIC prefers.
-   Repeat for another effect on top. When none is accepted, a control refitted with a trial's
-   settings that fits the training views better than the current fit is the final model.
+   Repeat for another effect on top, holding an accepted effect that asks for it
+   (``Effect.held_once_accepted``: a pose) at its fitted values. When none is accepted, a
+   control refitted with a trial's settings that fits the training views better than the
+   current fit is the final model.
 5. **Guard**: with two effects accepted, refit without the earlier one; if the later one now does
    its work alone (the earlier one no longer improves holdout and BIC), the earlier one was
    soaking up the later one's signature and is dropped.
