@@ -352,7 +352,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                 continue
             c = s.candidate
             extended = current.candidates + (c,)
-            own = model_settings(settings, tuple(e for e in extended if e not in settled))
+            own = model_settings(settings, extended, settled)
             if own != round_.control.settings and own not in round_.matched_controls:
                 step(f"round {r + 1}: control refit with {c.label}'s settings")
                 round_.matched_controls[own] = fit_model(

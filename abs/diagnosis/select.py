@@ -76,10 +76,13 @@ class ModelFit:
         return 3 * sum(int(v.mask.sum()) for v in self.result.views if not v.holdout)
 
 
-def model_settings(settings: FitSettings, candidates: tuple[Candidate, ...]) -> FitSettings:
+def model_settings(settings: FitSettings, candidates: tuple[Candidate, ...],
+                   settled: tuple[Candidate, ...] = ()) -> FitSettings:
     """The settings a model with ``candidates`` is fitted with: ``settings`` adjusted for what
     its effects need (full resolution, more samples per pixel, no refinement steps; see
-    :class:`~abs.diagnosis.effects.Effect`)."""
+    :class:`~abs.diagnosis.effects.Effect`), except those ``settled`` (held at accepted values,
+    ``Effect.held_once_accepted``: their needs were those of fitting them)."""
+    candidates = tuple(c for c in candidates if c not in settled)
     if any(effect(c.effect).full_resolution for c in candidates):
         settings = replace(settings, downsample=1)
     spp_factor = max((effect(c.effect).fit_spp_factor for c in candidates), default=1)
@@ -125,8 +128,8 @@ def fit_model(scene, capture, candidates: tuple[Candidate, ...], start: dict, se
     held = {n: np.asarray(start[n], float) for n in held_names}
     extended = extend_scene(scene, candidates, held, path)
     names = tuple(n for n in extended.fit_parameters if n not in held)
-    used = candidates if settings_of is None else settings_of
-    settings = model_settings(settings, tuple(c for c in used if c not in settled))
+    settings = model_settings(settings, candidates if settings_of is None else settings_of,
+                              settled)
     initial = {n: np.asarray(v, float) for n, v in start.items() if n in names}
     folder = path.with_name(path.stem + ".checkpoint")
     identity = model_identity(extended, capture, names, initial, settings)
