@@ -296,6 +296,9 @@ CASES = [
     # The map tilted by 8 degrees about x and 5 about z: highlights and refractions misplaced.
     Case("sphere-environment_rotation", "sphere", ("environment_rotation",),
          photographs=("turned_environment", {"rotation_vector": [0.14, 0.0, 0.09]})),
+    # The same tilt over the box scene: the box's painted faces and highlights move as well.
+    Case("box-environment_rotation", "box", ("environment_rotation",),
+         photographs=("turned_environment", {"rotation_vector": [0.14, 0.0, 0.09]})),
     # Every camera turned by 0.46 degrees about its x axis and 0.63 about its y axis: to first
     # order a principal-point error of (-0.74, -0.54) px at the suite's 48x36 (fx = 67.2 px).
     Case("sphere-camera_misalignment", "sphere", ("camera_misalignment",),
@@ -311,6 +314,8 @@ CASES = [
     # The map was unwrapped from a chromium ball photographed from +z (the cameras' side) without
     # dividing by its Fresnel reflectance (optical constants of tests/test_probe.py).
     Case("sphere-probe_fresnel", "sphere", ("probe_fresnel",),
+         photographs=("chrome_probe_map", {"eta": [3.28, 3.05, 2.37], "k": [3.31, 3.31, 3.14]})),
+    Case("box-probe_fresnel", "box", ("probe_fresnel",),
          photographs=("chrome_probe_map", {"eta": [3.28, 3.05, 2.37], "k": [3.31, 3.31, 3.14]})),
     # The seed's trade-off: the scene file's cloth is too bright (0.7 for a true 0.55) and the
     # glass absorbs. The catalogue has no effect for a wrong reflectance, so the cloth's
