@@ -57,7 +57,7 @@ def test_effects_at_null_reproduce_the_scene_exactly(fixture, request, tmp_path)
     if "glass" in scene.materials:
         assert {"absorption", "surface_roughness", "surface_detail"} <= {c.effect for c in pool}
     else:
-        assert "pose" in {c.effect for c in pool}
+        assert {"pose", "placement"} <= {c.effect for c in pool}
     extended = extend_scene(scene, tuple(pool), {}, tmp_path / "extended.toml")
     assert set(p for c in pool for p in c.parameters) <= set(extended.fit_parameters)
     image = compile_scene(extended).render(camera, spp=2, seed=5).numpy()
@@ -372,6 +372,11 @@ def test_another_form_of_an_accepted_effect_is_still_fitted():
     passed = (first, None, SimpleNamespace(accepted=True, delta_bic=-9000.0))
     assert _clear_winner(passed, score("stray_light", "sensor", 400.0))
     assert not _clear_winner(passed, score("camera_misalignment", "cameras", 3000.0))
+    # Nor an alternative form (Effect.alternatives): a pose does not spare its placement's fit.
+    pose = score("pose", "box", 3000.0)
+    passed = (pose, None, SimpleNamespace(accepted=True, delta_bic=-9000.0))
+    assert not _clear_winner(passed, score("placement", "box", 400.0))
+    assert _clear_winner(passed, score("stray_light", "sensor", 400.0))
 
 
 @pytest.mark.slow

@@ -213,7 +213,18 @@ def _clear_winner(first: tuple, runner_up: CandidateScore) -> bool:
     trial, _, comparison = first
     return (runner_up.method == "score test" and comparison.accepted
             and runner_up.candidate.effect != trial.candidate.effect
+            and runner_up.candidate.effect not in effect(trial.candidate.effect).alternatives
             and -comparison.delta_bic > 2.0 * runner_up.predicted_bic_gain)
+
+
+def _remaining(pool: list[Candidate], accepted: list[Candidate]) -> list[Candidate]:
+    """The candidates still open after ``accepted``: not an accepted effect (at any target), nor
+    an alternative form of one at its target (:attr:`~abs.diagnosis.effects.Effect.alternatives`:
+    an object is placed once, by its pose or its placement)."""
+    taken = {a.effect for a in accepted}
+    return [c for c in pool if c.effect not in taken
+            and not any(a.target == c.target and a.effect in effect(c.effect).alternatives
+                        for a in accepted)]
 
 
 def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
@@ -319,7 +330,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
     current_settled: tuple = ()  # the effects held when the current model was fitted
     scatter = 0.0
     for r in range(max_effects):
-        remaining = [c for c in pool if c.effect not in {a.effect for a in accepted}]
+        remaining = _remaining(pool, accepted)
         if not remaining:
             break
         step(f"round {r + 1}: scoring {len(remaining)} candidates")

@@ -3,13 +3,14 @@
 Names follow the scene file: ``<material>.<field>``, ``environment.scale``,
 ``environment.rotation``, ``environment.orientation``, ``environment.inverse_distance``,
 ``environment.probe_fresnel``,
-``sensor.<field>``, ``<object>.pose``.
+``sensor.<field>``, ``<object>.pose``, ``<object>.placement``.
 Each has a size (3 for per-channel quantities), a unit and physical bounds; fitting code maps
 bounds to unconstrained variables.
 
 A material and an object may share a name (a ``cloth`` material on a ``cloth`` object):
-``pose`` is an object's only parameter and no material may have a field of that name, so
-``cloth.pose`` is the object's and every other ``cloth.<field>`` the material's.
+``pose`` and ``placement`` are an object's only parameters (:data:`OBJECT_FIELDS`) and no material
+may have a field of those names, so ``cloth.pose`` is the object's and every other
+``cloth.<field>`` the material's.
 
 Each :class:`Parameter` carries what its owner knows about it: its null value (where the effect it
 models is absent, if it models one) and its setter (how it is written into a compiled scene), so
@@ -22,14 +23,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from abs.params.setters import AttributeSetter, PoseSetter, Setter
+from abs.params.setters import AttributeSetter, PlacementSetter, PoseSetter, Setter
 
-__all__ = ["Parameter", "parameter_specs", "POSE_FIELD"]
+__all__ = ["Parameter", "parameter_specs", "POSE_FIELD", "PLACEMENT_FIELD", "OBJECT_FIELDS"]
 
 INF = float("inf")
 
 POSE_FIELD = "pose"
-"""An object's one parameter, ``<object>.pose``; reserved: no material may have a field so named."""
+"""An object's rigid correction, ``<object>.pose``: ``[tx, ty, tz, rx, ry, rz]``."""
+
+PLACEMENT_FIELD = "placement"
+"""An object's correction on the ground plane, ``<object>.placement``: ``[tx, tz, ry]``, a slide
+along x and z and a turn about +y (the pose ``[tx, 0, tz, 0, ry, 0]``): how an object standing on
+a table is misplaced, with half the pose's freedoms (``docs/conventions.md``)."""
+
+OBJECT_FIELDS = (POSE_FIELD, PLACEMENT_FIELD)
+"""An object's parameters; reserved: no material may have a field so named."""
 
 
 @dataclass(frozen=True)
@@ -169,4 +178,8 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             f"{obj.name}.{POSE_FIELD}", 6, "m, m, m, rad, rad, rad", -INF, INF,
             np.asarray(obj.pose, dtype=np.float64), moves_paths=True, null=np.zeros(6),
             setter=PoseSetter(obj.name))
+        specs[f"{obj.name}.{PLACEMENT_FIELD}"] = Parameter(
+            f"{obj.name}.{PLACEMENT_FIELD}", 3, "m, m, rad", -INF, INF,
+            np.asarray(obj.placement, dtype=np.float64), moves_paths=True, null=np.zeros(3),
+            setter=PlacementSetter(obj.name))
     return specs

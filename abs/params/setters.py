@@ -4,7 +4,7 @@ A :class:`~abs.params.names.Parameter` carries one of these (its owner chooses w
 :meth:`abs.render.CompiledScene.set` calls it, so the compiled scene holds no list of owners.
 They are duck-typed against the compiled scene (its ``environment``, ``sensor``, ``params``,
 ``scene``, :meth:`~abs.render.CompiledScene.write_mitsuba`,
-:meth:`~abs.render.CompiledScene.set_pose` and
+:meth:`~abs.render.CompiledScene.move_object` and
 :meth:`~abs.render.CompiledScene.set_normal_smoothing`), so this module imports nothing from the renderer and
 the parameter catalogue stays below it in the layers. Plain classes rather than closures: they
 compare, print and pickle.
@@ -15,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["Setter", "AttributeSetter", "PoseSetter", "NormalSmoothingSetter", "MitsubaKeySetter",
-           "MaterialApplySetter"]
+__all__ = ["Setter", "AttributeSetter", "PoseSetter", "PlacementSetter", "NormalSmoothingSetter",
+           "MitsubaKeySetter", "MaterialApplySetter"]
 
 
 class Setter(Protocol):
@@ -40,12 +40,24 @@ class AttributeSetter:
 
 @dataclass(frozen=True)
 class PoseSetter:
-    """An object's pose: its mesh is moved rigidly (see ``docs/conventions.md``)."""
+    """An object's pose: its mesh is moved rigidly (see ``docs/conventions.md``). The compiled
+    scene composes it with the object's placement, whose value it has recorded."""
 
     obj: str
 
     def __call__(self, compiled, value) -> None:
-        compiled.set_pose(self.obj, value)
+        compiled.move_object(self.obj)
+
+
+@dataclass(frozen=True)
+class PlacementSetter:
+    """An object's placement on the ground plane: its mesh slides and turns about +y (see
+    ``docs/conventions.md``), composed with its pose."""
+
+    obj: str
+
+    def __call__(self, compiled, value) -> None:
+        compiled.move_object(self.obj)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import mitsuba as mi
 import numpy as np
 
 from abs.errors import SceneError
-from abs.params.names import POSE_FIELD, Parameter, parameter_specs
+from abs.params.names import OBJECT_FIELDS, PLACEMENT_FIELD, POSE_FIELD, Parameter, parameter_specs
 from abs.params.setters import NormalSmoothingSetter
 from abs.render import bsdfs as _bsdfs  # noqa: F401  (registers abs's BSDF plugins)
 from abs.render.brdf_tables import bind_coefficients
@@ -124,8 +124,9 @@ class CompiledScene:
             if p.initial is not None:
                 self.values[name] = opaque(mi.Float, np.asarray(p.initial, np.float32))
         for obj in scene.objects:
-            if np.any(obj.pose != 0):
-                self.set(f"{obj.name}.{POSE_FIELD}", from_numpy(mi.Float, obj.pose))
+            for field, value in ((POSE_FIELD, obj.pose), (PLACEMENT_FIELD, obj.placement)):
+                if np.any(value != 0):
+                    self.set(f"{obj.name}.{field}", from_numpy(mi.Float, value))
         for name, spec in self.specs.items():
             # Fields that reshape meshes rather than set a BSDF value: Mitsuba loaded the meshes
             # as they are, so a scene file's non-null value is written into them here.
@@ -227,9 +228,8 @@ class CompiledScene:
         for obj in self.scene.objects:
             if obj.material != material or self._rest[obj.name][1] is None:
                 continue
-            pose = self.values.get(f"{obj.name}.{POSE_FIELD}")
-            if pose is not None and (dr.grad_enabled(pose) or np.any(np.asarray(dr.detach(pose)) != 0)):
-                self.set_pose(obj.name, pose)  # writes the smoothed normals, turned
+            if self._moved(obj.name):
+                self.move_object(obj.name)  # writes the smoothed normals, turned
             else:
                 self.params[f"{self.shape_ids[obj.name]}.vertex_normals"] = dr.ravel(self._normals(obj.name))
 
@@ -248,22 +248,48 @@ class CompiledScene:
         s = dr.gather(mi.Float, self._smoothing[material], mi.UInt32(0))
         return n + s * mi.Vector3f(*[from_numpy(mi.Float, detail[:, i]) for i in range(3)])
 
-    def set_pose(self, obj: str, pose: mi.Float) -> None:
-        """Move object ``obj``'s mesh rigidly to ``pose`` (``[tx, ty, tz, rx, ry, rz]``, metres
-        and a rotation vector about the mesh's centroid; ``docs/conventions.md``) from where the
-        scene file puts it. Use :meth:`set` (``<obj>.pose``), which records the value."""
+    def _moved(self, obj: str) -> bool:
+        """Whether object ``obj`` has a pose or placement that is non-zero or being differentiated."""
+        for field in OBJECT_FIELDS:
+            value = self.values.get(f"{obj}.{field}")
+            if value is not None and (dr.grad_enabled(value) or np.any(np.asarray(dr.detach(value)) != 0)):
+                return True
+        return False
+
+    def move_object(self, obj: str) -> None:
+        """Move object ``obj``'s mesh rigidly from where the scene file puts it by its recorded
+        pose (``[tx, ty, tz, rx, ry, rz]``, metres and a rotation vector about the mesh's
+        centroid) and placement (``[tx, tz, ry]``: the pose ``[tx, 0, tz, 0, ry, 0]``), composed
+        as ``x' = R(r_pose) R_y(ry) (x - c) + c + t_placement + t_pose``
+        (``docs/conventions.md``). :meth:`set` (``<obj>.pose``, ``<obj>.placement``) records a
+        value and calls this."""
         pos, normals, centre = self._rest[obj]
-        t = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3)])
-        r = mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])
-        rot = rotation_matrix(r)
+        zero = mi.Float(0.0)
+        pose = self.values.get(f"{obj}.{POSE_FIELD}")
+        placement = self.values.get(f"{obj}.{PLACEMENT_FIELD}")
+        t = mi.Vector3f(0.0)
+        rot = mi.Matrix3f(1.0)
+        if placement is not None:
+            # The placement first: its turn is about the vertical through the centroid, whatever
+            # the pose's tilt then does.
+            slide = [dr.gather(mi.Float, placement, i) for i in range(3)]
+            t = mi.Vector3f(slide[0], zero, slide[1])
+            rot = rotation_matrix(mi.Vector3f(zero, slide[2], zero))
+        if pose is not None:
+            t = t + mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3)])
+            rot = rotation_matrix(mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])) @ rot
         c = mi.Vector3f(*[float(x) for x in centre])
         p = mi.Vector3f(*[from_numpy(mi.Float, pos[:, i]) for i in range(3)])
-        positions = dr.ravel(rot @ (p - c) + c + t)
+        moved = self._moved(obj)
+        # Back at the null values (and detached) the mesh is the loaded one bit for bit, which
+        # (p - c) + c in floating point is not.
+        positions = dr.ravel(rot @ (p - c) + c + t if moved else p)
         self._posed[obj] = positions
         sid = self.shape_ids[obj]
         self.params[f"{sid}.vertex_positions"] = positions
         if normals is not None:
-            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ self._normals(obj))
+            n = self._normals(obj)
+            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ n if moved else n)
 
     def set_difference_step(self, name: str, step: float) -> None:
         """Take ``name``'s derivative by central differences of ``step`` (its units) from now on
@@ -281,11 +307,12 @@ class CompiledScene:
         return self.specs[name]
 
     def moving_meshes(self) -> list[MovingMesh]:
-        """Meshes whose pose is attached to the AD graph (their silhouettes need edge sampling)."""
+        """Meshes whose pose or placement is attached to the AD graph (their silhouettes need
+        edge sampling)."""
         out = []
         for obj in self.scene.objects:
-            value = self.values.get(f"{obj.name}.pose")
-            if value is None or not dr.grad_enabled(value):
+            values = [self.values.get(f"{obj.name}.{field}") for field in OBJECT_FIELDS]
+            if not any(v is not None and dr.grad_enabled(v) for v in values):
                 continue
             if obj.name not in self._adjacency:
                 faces = np.array(self.params[f"{self.shape_ids[obj.name]}.faces"],

@@ -1,9 +1,9 @@
 """Visibility gradients of moving objects by silhouette edge sampling (Li et al. 2018,
 "Differentiable Monte Carlo ray tracing through edge sampling").
 
-When a parameter moves an object (``<object>.pose``), its silhouette sweeps across the image and
-the pixel integrals gain a boundary term that automatic differentiation of the (continuous)
-interior misses. For a pixel filter ``k`` the term is
+When a parameter moves an object (``<object>.pose``, ``<object>.placement``), its silhouette sweeps
+across the image and the pixel integrals gain a boundary term that automatic differentiation of
+the (continuous) interior misses. For a pixel filter ``k`` the term is
 
     d/dtheta I_p = integral over silhouette edges of k(x - p) (L_minus - L_plus) (dx/dtheta . n) dl
 

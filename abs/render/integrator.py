@@ -341,8 +341,8 @@ class PathTracer:
     @staticmethod
     def _check_moving(camera: Camera, moving) -> None:
         if moving and camera.block > 1:
-            raise NotImplementedError("pose gradients (edge sampling) need block == 1: fit "
-                                      "poses without --downsample")
+            raise NotImplementedError("pose and placement gradients (edge sampling) need block == 1: "
+                                      "fit them without --downsample")
 
     @staticmethod
     def _split(scene: mi.Scene, dispersion: str) -> bool:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from abs.errors import SceneError
-from abs.params.names import POSE_FIELD
+from abs.params.names import OBJECT_FIELDS
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
@@ -92,11 +92,13 @@ def load_scene(path: str | Path) -> Scene:
         if cls is None:
             raise fields.error("type", f"unknown material type {type_name!r}; known types: "
                                        f"{', '.join(material_types())}")
-        if fields.has(POSE_FIELD):
-            raise _pose_field(fields, name)
+        for reserved in OBJECT_FIELDS:
+            if fields.has(reserved):
+                raise _object_field(fields, name, reserved)
         materials[name] = cls.from_fields(name, fields)
-        if POSE_FIELD in materials[name].parameters():  # a material type that declares one
-            raise _pose_field(fields, name)
+        for reserved in OBJECT_FIELDS:
+            if reserved in materials[name].parameters():  # a material type that declares one
+                raise _object_field(fields, name, reserved)
         materials[name]._files = fields.files_below()
     if not materials:
         raise mat_fields.error("", "no materials defined")
@@ -109,10 +111,10 @@ def load_scene(path: str | Path) -> Scene:
         if not isinstance(raw, dict):
             raise root.error(f"objects[{i}]", "expected a table")
         fields = Fields(raw, source, f"objects[{i}]")
-        fields.check_known({"name", "mesh", "material", "to_world", "pose"})
+        fields.check_known({"name", "mesh", "material", "to_world", "pose", "placement"})
         name = fields.string("name")
         # An object may share its material's name (a "cloth" object of material "cloth"): its
-        # one parameter is <name>.pose, and no material has a field named pose.
+        # parameters are <name>.pose and <name>.placement, and no material has such fields.
         _check_name(fields, "name", name, "object")
         if any(o.name == name for o in objects):
             raise fields.error("name", f"duplicate object name {name!r}")
@@ -126,6 +128,7 @@ def load_scene(path: str | Path) -> Scene:
             material=material,
             to_world=fields.transform("to_world"),
             pose=fields.array("pose", (6,), default=[0.0] * 6),
+            placement=fields.array("placement", (3,), default=[0.0] * 3),
         ))
 
     scene = Scene(source, render, environment, materials, tuple(objects), sensor)
@@ -141,12 +144,12 @@ def load_scene(path: str | Path) -> Scene:
                    fit_priors=_fit_priors(fit_fields, known))
 
 
-def _pose_field(fields: Fields, name: str) -> SceneError:
-    """The error for a material field named ``pose``, which would share its parameter name with
-    an object's pose (``<name>.pose``): the contract reserves that name for objects."""
-    return fields.error(POSE_FIELD, f"a material may not have a field named {POSE_FIELD!r}: "
-                                    f"parameter '{name}.{POSE_FIELD}' would name the pose of an object "
-                                    f"called {name!r} (objects and materials may share names)")
+def _object_field(fields: Fields, name: str, reserved: str) -> SceneError:
+    """The error for a material field named ``pose`` or ``placement``, which would share its
+    parameter name with an object's (``<name>.pose``): the contract reserves them for objects."""
+    return fields.error(reserved, f"a material may not have a field named {reserved!r}: "
+                                  f"parameter '{name}.{reserved}' would name the {reserved} of an "
+                                  f"object called {name!r} (objects and materials may share names)")
 
 
 def _unit(fields: Fields, key: str, default) -> np.ndarray:

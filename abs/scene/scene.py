@@ -116,7 +116,8 @@ class SensorSpec:
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """``[[objects]]``: a mesh with a material; ``pose`` is a correction on top of ``to_world``
+    """``[[objects]]``: a mesh with a material; ``pose`` (``[tx, ty, tz, rx, ry, rz]``) and
+    ``placement`` (``[tx, tz, ry]`` on the ground plane) are corrections on top of ``to_world``
     (see docs/conventions.md)."""
 
     name: str
@@ -124,6 +125,7 @@ class ObjectSpec:
     material: str
     to_world: np.ndarray = field(default_factory=lambda: np.eye(4))
     pose: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    placement: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True)

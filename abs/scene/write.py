@@ -146,6 +146,10 @@ def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
         table = {"name": obj.name, "mesh": _relative(obj.mesh, folder), "material": obj.material}
         _transform(table, obj.to_world)
         table["pose"] = values.get(f"{obj.name}.pose", np.asarray(obj.pose, np.float64).tolist())
+        # Written only where it is used, so scene files of objects that have none stay as they were.
+        placement = values.get(f"{obj.name}.placement", np.asarray(obj.placement, np.float64).tolist())
+        if np.any(np.asarray(placement) != 0) or f"{obj.name}.placement" in values:
+            table["placement"] = placement
         objects.append(table)
 
     data = {
@@ -173,7 +177,7 @@ def _material_table(material: Material, folder: Path, values: dict[str, object])
         # A file the material resolved but does not write back is not ours to add.
         if isinstance(sub, dict) and isinstance(sub.get(last), str):
             sub[last] = _relative(path, folder)
-    fields = material.parameters()  # not <name>.pose, an object's when one shares the name
+    fields = material.parameters()  # not <name>.pose or .placement, an object's when one shares the name
     for name, value in values.items():
         owner, field = name.split(".", 1)
         if owner == material.name and field in fields:

@@ -89,6 +89,11 @@ class Effect(ABC):
         ``fit_spp_factor``, ``fit_refinement``) no longer set those fits' settings: for an effect
         whose fits are costly and that later refits at the diagnosis's samples did not improve
         (a pose: every later trial at full resolution, each with its own control).
+    alternatives : tuple of str
+        Effects that model the same error of the same target in another form (an object's
+        ``placement`` and its ``pose``): once one is accepted for a target the others are no
+        longer candidates there, and a clear winner never spares its alternatives' fits (only
+        their fits tell the forms apart).
     """
 
     name: ClassVar[str]
@@ -99,6 +104,7 @@ class Effect(ABC):
     fit_refinement: ClassVar[bool] = True
     crossed_comparison: ClassVar[bool] = False
     held_once_accepted: ClassVar[bool] = False
+    alternatives: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
     def targets(self, scene, compiled) -> list[str]:

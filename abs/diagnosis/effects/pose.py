@@ -1,10 +1,14 @@
-"""``pose``: an object is displaced or rotated from where the scene file places it."""
+"""``pose``: an object is displaced or rotated from where the scene file places it (six
+freedoms; ``placement`` is its form on the ground plane, three)."""
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 import numpy as np
 
 from abs.diagnosis.effects.base import Effect, missing, register
+from abs.params.names import OBJECT_FIELDS, POSE_FIELD
 
 # Flat objects (a floor, a backdrop) slide within their own plane invisibly: only solid ones.
 # Glass objects are left out: the renderer's pose gradients miss silhouettes seen through glass
@@ -47,22 +51,27 @@ class Pose(Effect):
     # minimum (box-pose) or, with the refinement, left the right one (above); only a refit at
     # 64 spp (with a cloth lobe's trial) found the true pose there.
     held_once_accepted = True
+    alternatives = ("placement",)
+    field: ClassVar[str] = POSE_FIELD  # the object's parameter this form fits, and its size
+    size: ClassVar[int] = 6
 
     def targets(self, scene, compiled) -> list[str]:
+        # An object the scene file already places or poses (or whose either is fitted) is not a
+        # target of either form.
         extents = {s.id(): np.array(s.bbox().max, float).ravel() - np.array(s.bbox().min, float).ravel()
                    for s in compiled.mitsuba_scene.shapes()}
         return [o.name for o in scene.objects
-                if missing(scene, compiled.specs, f"{o.name}.pose")
+                if all(missing(scene, compiled.specs, f"{o.name}.{f}") for f in OBJECT_FIELDS)
                 and not scene.materials[o.material].transmissive
                 and np.min(extents.get(compiled.shape_ids[o.name], np.zeros(3))) > _MIN_EXTENT_M]
 
     def add(self, data: dict, target: str) -> None:
         for table in data["objects"]:
             if table["name"] == target:
-                table["pose"] = [0.0] * 6
+                table[self.field] = [0.0] * self.size
 
     def parameters(self, target: str) -> tuple[str, ...]:
-        return (f"{target}.pose",)
+        return (f"{target}.{self.field}",)
 
     def explain(self, target: str, values: dict) -> str:
         pose = np.asarray(values[f"{target}.pose"], float)
