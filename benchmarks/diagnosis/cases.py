@@ -12,6 +12,7 @@ Two scenes, built on the fly:
 - ``noisy``: the sphere scene whose glass mesh is a scan of the sphere with noise
   (``sphere_noisy.ply``: the same vertices moved along their radii by 0.5 mm, RMS); fitted:
   ``environment.scale``.
+- ``noisybox``: the box scene with that noisy glass mesh; fitted as the box scene.
 """
 
 from __future__ import annotations
@@ -311,6 +312,8 @@ CASES = [
     # resolve it at twice the size, as for subsurface.
     Case("noisy-surface_detail", "noisy", ("surface_detail",),
          photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"}), upscale=2),
+    Case("noisybox-surface_detail", "noisybox", ("surface_detail",),
+         photographs=("clean_glass_mesh", {"clean_mesh": "sphere.ply"}), upscale=2),
     # The map was unwrapped from a chromium ball photographed from +z (the cameras' side) without
     # dividing by its Fresnel reflectance (optical constants of tests/test_probe.py).
     Case("sphere-probe_fresnel", "sphere", ("probe_fresnel",),
@@ -329,6 +332,7 @@ CASES = [
     # Under the suite's soft room an energy-conserving lobe changes little (under uniform light
     # it changes nothing): 0.01-0.03 RMS at 48x36, 256 spp.
     Case("sphere-cloth_anisotropy", "sphere", ("cloth_anisotropy",), {"cloth.anisotropy": [0.1, 0.3]}),
+    Case("box-cloth_anisotropy", "box", ("cloth_anisotropy",), {"cloth.anisotropy": [0.1, 0.3]}),
     # The same weights photographed through Mitsuba's blendbsdf of diffuse and roughconductor
     # lobes (single scattering: about 20 % of the lobes' light is lost, so the cloth is darker
     # too); its reflectance is fitted (the ``cloth`` scene), as a user would.
@@ -380,10 +384,11 @@ def build_scene(root: Path, kind: str) -> Path:
     _conftest()
     from conftest import box_object_toml, make_noisy_sphere, sphere_scene_toml
 
-    fit = {"box": ["environment.scale", "paint.reflectance"], "sphere": ["environment.scale"],
-           "cloth": ["environment.scale", "cloth.reflectance"], "noisy": ["environment.scale"]}[kind]
-    text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (box_object_toml() if kind == "box" else "")
-    if kind == "noisy":
+    box = ["environment.scale", "paint.reflectance"]
+    fit = {"box": box, "sphere": ["environment.scale"], "cloth": ["environment.scale", "cloth.reflectance"],
+           "noisy": ["environment.scale"], "noisybox": box}[kind]
+    text = sphere_scene_toml(fit, absorption=[0.0, 0.0, 0.0]) + (box_object_toml() if fit is box else "")
+    if kind.startswith("noisy"):
         if not (root / "sphere_noisy.ply").exists():
             make_noisy_sphere(root / "sphere_noisy.ply", NOISE_M, seed=0)
         text = text.replace('mesh = "sphere.ply"', 'mesh = "sphere_noisy.ply"')
