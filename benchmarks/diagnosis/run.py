@@ -131,6 +131,18 @@ def _fmt(v) -> str:
     return "[" + ", ".join(f"{x:.3g}" for x in np.ravel(v)) + "]"
 
 
+def _recovered(recovered: dict, name: str, truth) -> str:
+    """``name``'s recovered value against its truth; a pose found as a placement ``[tx, tz, ry]``
+    is the pose ``[tx, 0, tz, 0, ry, 0]``."""
+    owner, field = name.split(".", 1)
+    if name in recovered:
+        return f"{name}: {_fmt(recovered[name])} vs {_fmt(truth)}"
+    if field == "pose" and f"{owner}.placement" in recovered:
+        tx, tz, ry = recovered[f"{owner}.placement"]
+        return f"{name}: {_fmt([tx, 0.0, tz, 0.0, ry, 0.0])} (as {owner}.placement) vs {_fmt(truth)}"
+    return f"{name}: not found (truth {_fmt(truth)})"
+
+
 def _holdout(row: dict) -> str:
     """Baseline -> final holdout RMSE, and each accepted effect's compared errors."""
     text = f"{row['holdout_rmse_before']:.4g} -> {row['holdout_rmse_after']:.4g}"
@@ -163,8 +175,7 @@ def summarise(rows: list[dict], config: dict) -> tuple[dict, str]:
              "|---|---|---|---|---|---|"]
     config_size = [config.get("width"), config.get("height")]
     for r in rows:
-        rec = "; ".join(f"{p}: {_fmt(r['recovered'][p])} vs {_fmt(t)}" if p in r["recovered"]
-                        else f"{p}: not found (truth {_fmt(t)})" for p, t in r["truth"].items())
+        rec = "; ".join(_recovered(r["recovered"], p, t) for p, t in r["truth"].items())
         if r.get("truth_renderer"):
             found = "; ".join(f"{p}: {_fmt(v)}" for p, v in r["recovered"].items()
                               if p not in r["truth"]) or "nothing fitted"
