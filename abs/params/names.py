@@ -150,10 +150,10 @@ def parameter_specs(scene) -> dict[str, Parameter]:
             "environment.orientation", 3, "rad, rad, rad", -INF, INF,
             np.asarray(env.orientation, np.float64), null=np.zeros(3),
             setter=AttributeSetter("environment", "orientation")),
-        # The chrome ball's Fresnel left in a probe map, per channel; zeros: the map as given.
-        # Channel c of the light, hence of the image, depends on c_c alone.
+        # The mirror ball's Fresnel left in a probe map, per channel (1: all of it); zeros: the
+        # map as given. Channel c of the light, hence of the image, depends on c_c alone.
         "environment.probe_fresnel": Parameter(
-            "environment.probe_fresnel", 3, "1", -0.9, 10.0, np.asarray(env.probe_fresnel, np.float64),
+            "environment.probe_fresnel", 3, "1", -0.9, 5.0, np.asarray(env.probe_fresnel, np.float64),
             separable_channels=True, null=np.zeros(3),
             setter=AttributeSetter("environment", "probe_fresnel")),
     }

@@ -101,7 +101,7 @@ class CompiledScene:
         spec = scene.environment
         self.environment = Environment(read_image(spec.file), spec.scale, spec.to_world, spec.rotation,
                                        spec.inverse_distance, spec.center, spec.orientation,
-                                       spec.probe_fresnel, spec.probe_view)
+                                       spec.probe_fresnel, spec.probe_view, spec.probe_ior, spec.probe_k)
         self.sensor = Sensor(scene.sensor.vignetting, scene.sensor.response, scene.sensor.stray_light,
                              scene.sensor.colour_matrix, scene.sensor.intrinsics_offset,
                              scene.sensor.camera_turn)

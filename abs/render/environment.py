@@ -27,16 +27,21 @@ which is exactly ``d`` at ``inv = 0`` and has the first-order term ``o' - b d`` 
 Sampling stays in direction space (the pdf of ``d``), so the estimators are unchanged.
 
 Chrome Fresnel left in a light-probe map (``environment.probe_fresnel`` = ``c`` per channel):
-a chrome ball reflects more light at grazing incidence than facing the camera, so a probe map not
-divided by the ball's reflectance is too bright in the directions the ball's rim shows (behind
-the ball as seen from the probe camera). The light from map direction ``l`` is then
+a mirror ball's reflectance depends on the angle of incidence, so a probe map not divided by it
+carries it: brighter in the directions the ball's rim shows (behind the ball as seen from the
+probe camera), a few per cent darker, and differently per colour, over the wide band between
+(a metal's reflectance dips below its normal-incidence value before it rises to 1 at grazing).
+The light from map direction ``l`` is then
 
-    L(l) = L_map(l) / (1 + c (1 - cos_i)^5),     cos_i = sqrt((1 + l.v) / 2),
+    L(l) = L_map(l) / (1 + c (F(cos_i) / F(1) - 1)),     cos_i = sqrt((1 + l.v) / 2),
 
-Schlick's shape of a metal's ``F(cos_i) / F(1)`` (``c = 1/F0 - 1``, about 0.8 for chromium),
-``cos_i`` the ball's angle of incidence for ``l`` seen by a distant camera in direction ``v``
-(``probe_view``, map frame). At ``c = 0`` it divides by ``1 + 0 w = 1`` exactly, so the map is
-looked up as without it. Sampling ignores the factor (a pdf that differs from the light is
+``F`` the exact unpolarised Fresnel reflectance of the ball's metal (complex index
+``probe_ior + i probe_k`` per channel; Mitsuba's ``fresnel_conductor``), ``cos_i`` the ball's
+angle of incidence for ``l`` seen by a distant camera in direction ``v`` (``probe_view``, map
+frame). ``c = 1``: the ball's reflectance left in whole; ``c = 0``: divided out, and the factor
+is ``1 + 0 w = 1`` exactly, so the map is looked up as without it. (Schlick's ``(1 - cos_i)^5``
+shape, the model before, rises monotonically and cannot render the dip, which is what lights a
+scene whose cameras stood where the probe camera did; a colour matrix mimicked it better.) Sampling ignores the factor (a pdf that differs from the light is
 still unbiased), and :meth:`Environment.mitsuba_dict`'s emitter leaves it out.
 
 Conventions (docs/conventions.md): Mitsuba's orientation, ``u = atan2(x, -z) / 2pi``,
@@ -52,6 +57,7 @@ import numpy as np
 
 from abs.render.jit import from_numpy, opaque
 from abs.render.rotation import rotation_matrix
+from abs.scene.scene import CHROMIUM_IOR_RGB, CHROMIUM_K_RGB
 
 __all__ = ["Environment"]
 
@@ -90,12 +96,19 @@ class Environment:
     orientation : array-like, shape (3,)
         Rotation vector (axis times angle, radians, world frame) applied after ``rotation``
         (``environment.orientation``; zeros: none).
+    probe_fresnel : array-like, shape (3,)
+        Fraction of the probe ball's angle-dependent reflectance left in the map, per R, G, B
+        (``environment.probe_fresnel``; zeros: none; module docstring).
+    probe_view : array-like, shape (3,)
+        Direction from the ball towards the probe camera, map frame.
+    probe_ior, probe_k : array-like, shape (3,)
+        The ball's metal: real and imaginary parts of its complex index per R, G, B.
     """
 
     def __init__(self, rgb: np.ndarray, scale: float = 1.0, to_world: np.ndarray | None = None,
                  rotation: float = 0.0, inverse_distance: float = 0.0, center=(0.0, 0.0, 0.0),
                  orientation=(0.0, 0.0, 0.0), probe_fresnel=(0.0, 0.0, 0.0),
-                 probe_view=(0.0, 0.0, 1.0)):
+                 probe_view=(0.0, 0.0, 1.0), probe_ior=CHROMIUM_IOR_RGB, probe_k=CHROMIUM_K_RGB):
         rgb = np.ascontiguousarray(rgb, dtype=np.float32)
         self.height, self.width = rgb.shape[:2]
         self.data = mi.TensorXf(from_numpy(mi.Float, rgb), rgb.shape)
@@ -108,6 +121,10 @@ class Environment:
         view = np.asarray(probe_view, np.float64).ravel()
         # Opaque, like every value here, so that scenes with other views reuse the kernels.
         self.probe_view = mi.Vector3f(*(dr.opaque(mi.Float, float(x)) for x in view / np.linalg.norm(view)))
+        # The ball's metal per channel, and its reflectance at normal incidence (the reference).
+        self.probe_metal = [mi.Complex2f(dr.opaque(mi.Float, float(n)), dr.opaque(mi.Float, float(k)))
+                            for n, k in zip(np.ravel(probe_ior), np.ravel(probe_k))]
+        self._probe_f0 = [mi.fresnel_conductor(mi.Float(1.0), eta) for eta in self.probe_metal]
         self.center = mi.Point3f(*[float(c) for c in center])
         m = np.eye(4) if to_world is None else np.asarray(to_world, dtype=np.float64)
         self.to_world_np = m
@@ -137,11 +154,12 @@ class Environment:
         return self._bilinear(u, t, active) * self.scale / self._probe_fresnel(v)
 
     def _probe_fresnel(self, v: mi.Vector3f) -> mi.Color3f:
-        """``1 + c (1 - cos_i)^5`` for map-frame direction ``v`` (module docstring)."""
+        """``1 + c (F(cos_i) / F(1) - 1)`` for map-frame direction ``v`` (module docstring)."""
         cos_i = dr.safe_sqrt(0.5 * (1.0 + dr.dot(v, self.probe_view)))
-        w = dr.square(dr.square(1.0 - cos_i)) * (1.0 - cos_i)
         c = self.probe_fresnel
-        return mi.Color3f(*(1.0 + dr.gather(mi.Float, c, mi.UInt32(i)) * w for i in range(3)))
+        return mi.Color3f(*(1.0 + dr.gather(mi.Float, c, mi.UInt32(i))
+                            * (mi.fresnel_conductor(cos_i, eta) / f0 - 1.0)
+                            for i, (eta, f0) in enumerate(zip(self.probe_metal, self._probe_f0))))
 
     def hit_direction(self, origin: mi.Point3f, d: mi.Vector3f) -> mi.Vector3f:
         """Direction from the centre to where the ray ``origin + t d`` (``d`` unit) leaves the

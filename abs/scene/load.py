@@ -17,7 +17,8 @@ from abs.params.names import OBJECT_FIELDS
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
-from abs.scene.scene import EnvironmentSpec, ObjectSpec, Prior, RenderSettings, Scene, SensorSpec
+from abs.scene.scene import (CHROMIUM_IOR_RGB, CHROMIUM_K_RGB, EnvironmentSpec, ObjectSpec, Prior, RenderSettings,
+                             Scene, SensorSpec)
 
 __all__ = ["load_scene"]
 
@@ -66,7 +67,7 @@ def load_scene(path: str | Path) -> Scene:
 
     env_fields = root.sub("environment")
     env_fields.check_known({"file", "scale", "to_world", "rotation", "inverse_distance", "center",
-                            "orientation", "probe_fresnel", "probe_view"})
+                            "orientation", "probe_fresnel", "probe_view", "probe_ior", "probe_k"})
     environment = EnvironmentSpec(
         file=env_fields.file("file", suffixes=_IMAGE_SUFFIXES),
         scale=env_fields.number("scale", 1.0, lower=0.0),
@@ -76,9 +77,12 @@ def load_scene(path: str | Path) -> Scene:
         center=env_fields.array("center", (3,), default=[0.0, 0.0, 0.0]),
         # Three numbers, never one for all: a rotation vector [a, a, a] is no natural shorthand.
         orientation=env_fields.array("orientation", (3,), default=[0.0, 0.0, 0.0]),
-        # Bounded so that 1 + c (1 - cos_i)^5 stays positive for every direction.
-        probe_fresnel=env_fields.vector("probe_fresnel", 3, default=np.zeros(3), lower=-0.9, upper=10.0),
+        # Bounded so that 1 + c (F/F(1) - 1) stays positive for every direction for a ball of
+        # normal-incidence reflectance above 0.47 whose reflectance dips by less than 20 %.
+        probe_fresnel=env_fields.vector("probe_fresnel", 3, default=np.zeros(3), lower=-0.9, upper=5.0),
         probe_view=_unit(env_fields, "probe_view", [0.0, 0.0, 1.0]),
+        probe_ior=env_fields.rgb("probe_ior", default=np.array(CHROMIUM_IOR_RGB), lower=1e-3),
+        probe_k=env_fields.rgb("probe_k", default=np.array(CHROMIUM_K_RGB), lower=0.0),
     )
     sensor = _sensor(root.sub("sensor", required=False) or Fields({}, source, "sensor"))
 

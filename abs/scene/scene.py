@@ -13,6 +13,12 @@ import numpy as np
 
 from abs.scene.materials.base import Material
 
+#: A chromium mirror ball's complex index per R, G, B (real and imaginary parts): Johnson and
+#: Christy's chromium (refractiveindex.info, ``../shared/data/refractiveindex_info``) through
+#: :func:`abs.colour.optical_constants_rgb`, to two decimals. The default probe ball.
+CHROMIUM_IOR_RGB = (3.28, 3.05, 2.37)
+CHROMIUM_K_RGB = (3.31, 3.31, 3.14)
+
 __all__ = ["RenderSettings", "EnvironmentSpec", "SensorSpec", "ObjectSpec", "Prior", "Scene"]
 
 
@@ -32,11 +38,13 @@ class EnvironmentSpec:
     after both: a correction of the map's orientation about all three axes, a rotation vector
     (axis times angle, radians, world frame; zeros: none). With ``inverse_distance`` = 1/R > 0
     (1/m) the map lies on a sphere of radius R metres around ``center`` (world, metres), and
-    light from it shows parallax. ``probe_fresnel`` (per R, G, B, dimensionless; zeros: none) is
-    the chrome ball's angle-dependent reflectance left in a light-probe map: the light from map
-    direction ``l`` is the map's divided by ``1 + c (1 - cos_i)^5``, ``cos_i = sqrt((1 + l.v)/2)``
-    the ball's angle of incidence for ``l`` seen from ``probe_view`` ``v`` (a unit vector in the
-    map's own frame, from the ball towards the camera that photographed it).
+    light from it shows parallax. ``probe_fresnel`` ``c`` (per R, G, B, dimensionless; zeros:
+    none) is the fraction of the mirror ball's angle-dependent reflectance left in a light-probe
+    map: the light from map direction ``l`` is the map's divided by ``1 + c (F(cos_i) / F(1) - 1)``,
+    ``F`` the exact Fresnel reflectance of the ball's metal (complex index ``probe_ior + i
+    probe_k`` per R, G, B; default chromium's), ``cos_i = sqrt((1 + l.v)/2)`` the ball's angle of
+    incidence for ``l`` seen from ``probe_view`` ``v`` (a unit vector in the map's own frame, from
+    the ball towards the camera that photographed it).
     """
 
     file: Path
@@ -48,6 +56,8 @@ class EnvironmentSpec:
     orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
     probe_fresnel: np.ndarray = field(default_factory=lambda: np.zeros(3))
     probe_view: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    probe_ior: np.ndarray = field(default_factory=lambda: np.array(CHROMIUM_IOR_RGB))
+    probe_k: np.ndarray = field(default_factory=lambda: np.array(CHROMIUM_K_RGB))
 
 
 @dataclass(frozen=True)

@@ -136,6 +136,8 @@ def scene_table(scene: Scene, folder: Path, values: dict[str, object]) -> dict:
     environment["probe_fresnel"] = values.get("environment.probe_fresnel",
                                               np.asarray(env.probe_fresnel, np.float64).tolist())
     environment["probe_view"] = np.asarray(env.probe_view, np.float64).tolist()
+    environment["probe_ior"] = np.asarray(env.probe_ior, np.float64).tolist()
+    environment["probe_k"] = np.asarray(env.probe_k, np.float64).tolist()
     sensor = {key: values.get(f"sensor.{key}", np.asarray(getattr(scene.sensor, key), np.float64).tolist())
               for key in type(scene.sensor).FIELDS}
     # Three rows of three read as the matrix they are (the loader takes either form).
