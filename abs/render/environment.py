@@ -41,8 +41,9 @@ angle of incidence for ``l`` seen by a distant camera in direction ``v`` (``prob
 frame). ``c = 1``: the ball's reflectance left in whole; ``c = 0``: divided out, and the factor
 is ``1 + 0 w = 1`` exactly, so the map is looked up as without it. (Schlick's ``(1 - cos_i)^5``
 shape, the model before, rises monotonically and cannot render the dip, which is what lights a
-scene whose cameras stood where the probe camera did; a colour matrix mimicked it better.) Sampling ignores the factor (a pdf that differs from the light is
-still unbiased), and :meth:`Environment.mitsuba_dict`'s emitter leaves it out.
+scene whose cameras stood where the probe camera did; a colour matrix mimicked it better.)
+Sampling ignores the factor (a pdf that differs from the light is still unbiased), and
+:meth:`Environment.mitsuba_dict`'s emitter leaves it out.
 
 Conventions (docs/conventions.md): Mitsuba's orientation, ``u = atan2(x, -z) / 2pi``,
 ``v = acos(y) / pi`` in the map's local frame; column centres at ``u = (i + 0.5) / W`` and row
