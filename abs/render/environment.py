@@ -152,7 +152,21 @@ class Environment:
         u = dr.atan2(v.x, -v.z) * dr.inv_two_pi
         u = u - dr.floor(u)
         t = dr.safe_acos(v.y) * dr.inv_pi
-        return self._bilinear(u, t, active) * self.scale / self._probe_fresnel(v)
+        light = self._bilinear(u, t, active) * self.scale
+        return light / self._probe_fresnel(v) if self._probe_on else light
+
+    @property
+    def probe_fresnel(self) -> mi.Float:
+        """``c`` per R, G, B (module docstring)."""
+        return self._probe_c
+
+    @probe_fresnel.setter
+    def probe_fresnel(self, value: mi.Float) -> None:
+        # At the null value (and not differentiated) lookups skip the factor: the map as it is,
+        # bit for bit, without the three conductor Fresnel evaluations per lookup (about 5 % of
+        # a render of the default scene).
+        self._probe_c = value
+        self._probe_on = dr.grad_enabled(value) or bool(np.any(np.asarray(dr.detach(value)) != 0))
 
     def _probe_fresnel(self, v: mi.Vector3f) -> mi.Color3f:
         """``1 + c (F(cos_i) / F(1) - 1)`` for map-frame direction ``v`` (module docstring)."""
