@@ -355,6 +355,26 @@ def test_a_short_fit_candidate_is_fitted_even_behind_stronger_score_test_candida
     assert [s.candidate.effect for s in _eligible(weak, top_k=2)] == ["absorption"]
 
 
+def test_a_round_whose_strongest_candidates_fail_fits_the_next_ones_once():
+    """The next ``top_k`` score-test candidates with a positive predicted gain, after the tried
+    ones; short-fit candidates and hopeless ones are not among them."""
+    from abs.diagnosis.diagnose import _eligible, _next_eligible
+    from abs.diagnosis.effects import Candidate
+    from abs.diagnosis.score import CandidateScore
+
+    def score(name, gain, method="score test"):
+        return CandidateScore(Candidate(name, "t", (f"t.{name}",)), gain, 1, 1000, method)
+
+    scores = [score("probe_fresnel", 2798.0), score("colour_transform", 2641.0),
+              score("surface_roughness", 2000.0, "short fit"), score("environment_rotation", 1812.0),
+              score("cloth_anisotropy", 1339.0), score("vignetting", 950.0), score("absorption", -3.0)]
+    first = _eligible(scores, top_k=2)
+    assert [s.candidate.effect for s in first] == ["probe_fresnel", "colour_transform", "surface_roughness"]
+    assert [s.candidate.effect for s in _next_eligible(scores, first, 2)] == ["environment_rotation",
+                                                                           "cloth_anisotropy"]
+    assert _next_eligible(scores[:3] + scores[-1:], first, 2) == []
+
+
 def test_another_form_of_an_accepted_effect_is_still_fitted():
     """A clear winner spares the runner-up's fit, unless the runner-up is another form of the
     winner's effect (a camera turn beside a principal-point shift): only their fits tell them
