@@ -246,7 +246,7 @@ def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
 def _next_eligible(scores: list[CandidateScore], tried: list[CandidateScore],
                    top_k: int) -> list[CandidateScore]:
     """The ``top_k`` strongest score-test candidates after ``tried`` with a positive predicted
-    gain: fitted once in a round whose strongest all failed. The score test's linear prediction
+    gain: fitted once in a first round whose strongest all failed. The score test's linear prediction
     can rank first an effect that only correlates with the residual on the training views; its
     fit then fails on the holdout, and without a second batch the right effect, ranked behind
     it, would never be fitted (measured: a map turned by 8 and 5 degrees in the box scene, where
@@ -289,7 +289,7 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
     top_k : int
         Score-test candidates fitted fully per round (those with a positive predicted BIC gain),
         plus the strongest short-fit candidate (see :func:`_eligible`); when none of them is
-        accepted, the next ``top_k`` score-test candidates are fitted once
+        accepted in the first round, the next ``top_k`` score-test candidates are fitted once
         (:func:`_next_eligible`); a score-test runner-up
         is skipped when the first fit is accepted with a BIC gain more than twice the runner-up's
         predicted gain.
@@ -392,7 +392,10 @@ def diagnose(scene, capture, settings: FitSettings = DEFAULT_SETTINGS, max_effec
                                   settled=settled)
                 round_.trials.append((s, trial, compare(round_.reference(trial), trial, scatter,
                                                         capture, settings)))
-            if any(t[2].accepted for t in round_.trials) or batch is not eligible:
+            # Only while nothing has been found: a miss costs more than two fits, while after a
+            # finding every further trial is one more chance for the remainder of an
+            # approximately rendered first effect to pass as a second.
+            if any(t[2].accepted for t in round_.trials) or batch is not eligible or accepted:
                 break
             batch = _next_eligible(scores, batch, top_k)
         passed = [t for t in round_.trials if t[2].accepted]
