@@ -375,6 +375,30 @@ def test_a_round_whose_strongest_candidates_fail_fits_the_next_ones_once():
     assert _next_eligible(scores[:3] + scores[-1:], first, 2) == []
 
 
+def test_a_trial_is_compared_with_the_better_fit_of_the_model_without_it():
+    """The reference is the control refit unless the current (accepted) fit, with the trial's
+    settings, fits the training views better: a control that converged worse must not credit a
+    trial with the difference."""
+    from types import SimpleNamespace
+
+    from abs.diagnosis.diagnose import Round
+    from abs.fitting import FitSettings
+
+    def model(train, settings):
+        return SimpleNamespace(settings=settings, rmse=lambda split: train)
+
+    plain, more = FitSettings(spp=8), FitSettings(spp=64)
+    control, current = model(0.052, plain), model(0.050, plain)
+    round_ = Round([], control=control, current=current)
+    assert round_.reference(model(0.049, plain)) is current
+    assert Round([], control=control, current=model(0.053, plain)).reference(model(0.049, plain)) is control
+    # A trial with other settings is compared with the control refitted with them, never with
+    # the current fit of other settings.
+    matched = model(0.051, more)
+    round_.matched_controls[more] = matched
+    assert round_.reference(model(0.049, more)) is matched
+
+
 def test_another_form_of_an_accepted_effect_is_still_fitted():
     """A clear winner spares the runner-up's fit, unless the runner-up is another form of the
     winner's effect (a camera turn beside a principal-point shift): only their fits tell them
