@@ -60,10 +60,12 @@ def test_a_pose_found_as_a_placement_is_compared_with_the_true_pose():
     """``placement`` names a hidden pose (``run.FORMS``); the table shows its value as that pose."""
     row = {"case": "box-pose", "hidden": ["pose"], "verdict": ["placement"], "first_correct": True,
            "all_found": True, "wall_s": 500.0, "holdout_rmse_before": 0.06, "holdout_rmse_after": 0.05,
-           "accepted_holdout": [["placement", 0.06, 0.05]], "truth": {"box.pose": [0.004, 0, -0.003, 0, 0.04, 0]},
+           "accepted_holdout": [["placement", 0.06, 0.05]],
+           "truth": {"box.pose": [0.004, 0, -0.003, 0, 0.04, 0]},
            "recovered": {"box.placement": [0.0036, -0.0027, 0.029]}}
     _, markdown = summarise([row], {"width": 160, "height": 120, "photo_spp": 256})
-    assert "box.pose: [0.0036, 0, -0.0027, 0, 0.029, 0] (as box.placement) vs [0.004, 0, -0.003, 0, 0.04, 0]" in markdown
+    assert ("box.pose: [0.0036, 0, -0.0027, 0, 0.029, 0] (as box.placement) "
+            "vs [0.004, 0, -0.003, 0, 0.04, 0]") in markdown
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c.photographs is not None], ids=lambda c: c.name)

@@ -244,8 +244,9 @@ def _world_mesh(obj):
     mesh = trimesh.load(obj.mesh, force="mesh", process=False)
     for field in ("pose", "placement"):
         if np.any(np.asarray(getattr(obj, field)) != 0):
-            raise InputError(None, f"objects.{obj.name}.{field}", f"deform and the glass check use "
-                                                                  f"to_world only; fold the {field} into to_world first")
+            raise InputError(None, f"objects.{obj.name}.{field}",
+                             f"deform and the glass check use to_world only; fold the {field} into "
+                             f"to_world first")
     mesh.apply_transform(np.asarray(obj.to_world, dtype=np.float64))
     return mesh
 

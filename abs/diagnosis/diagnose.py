@@ -258,9 +258,9 @@ def _eligible(scores: list[CandidateScore], top_k: int) -> list[CandidateScore]:
 def _next_eligible(scores: list[CandidateScore], tried: list[CandidateScore],
                    top_k: int) -> list[CandidateScore]:
     """The ``top_k`` strongest score-test candidates after ``tried`` with a positive predicted
-    gain: fitted once in a first round whose strongest all failed. The score test's linear prediction
-    can rank first an effect that only correlates with the residual on the training views; its
-    fit then fails on the holdout, and without a second batch the right effect, ranked behind
+    gain: fitted once in a first round whose strongest all failed. The score test's linear
+    prediction can rank first an effect that only correlates with the residual on the training
+    views; its fit then fails on the holdout, and without a second batch the right effect, ranked behind
     it, would never be fitted (measured: a map turned by 8 and 5 degrees in the box scene, where
     the probe factor and a colour matrix scored 2798 and 2641, the turn 1812, and both failed)."""
     return [s for s in scores if s.method == "score test" and s.predicted_bic_gain > 0

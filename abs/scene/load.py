@@ -17,8 +17,8 @@ from abs.params.names import OBJECT_FIELDS
 from abs.scene import materials as _materials  # noqa: F401  (registers the material types)
 from abs.scene.fields import Fields
 from abs.scene.materials.base import material_class, material_types
-from abs.scene.scene import (CHROMIUM_IOR_RGB, CHROMIUM_K_RGB, EnvironmentSpec, ObjectSpec, Prior, RenderSettings,
-                             Scene, SensorSpec)
+from abs.scene.scene import (CHROMIUM_IOR_RGB, CHROMIUM_K_RGB, EnvironmentSpec, ObjectSpec, Prior,
+                             RenderSettings, Scene, SensorSpec)
 
 __all__ = ["load_scene"]
 
