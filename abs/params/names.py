@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from abs.params.setters import AttributeSetter, PlacementSetter, PoseSetter, Setter
+from abs.params.setters import AttributeSetter, PoseSetter, Setter
 
 __all__ = ["Parameter", "parameter_specs", "POSE_FIELD", "PLACEMENT_FIELD", "OBJECT_FIELDS"]
 
@@ -181,5 +181,5 @@ def parameter_specs(scene) -> dict[str, Parameter]:
         specs[f"{obj.name}.{PLACEMENT_FIELD}"] = Parameter(
             f"{obj.name}.{PLACEMENT_FIELD}", 3, "m, m, rad", -INF, INF,
             np.asarray(obj.placement, dtype=np.float64), moves_paths=True, null=np.zeros(3),
-            setter=PlacementSetter(obj.name))
+            setter=PoseSetter(obj.name))
     return specs

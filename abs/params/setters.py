@@ -15,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-__all__ = ["Setter", "AttributeSetter", "PoseSetter", "PlacementSetter", "NormalSmoothingSetter",
-           "MitsubaKeySetter", "MaterialApplySetter"]
+__all__ = ["Setter", "AttributeSetter", "PoseSetter", "NormalSmoothingSetter", "MitsubaKeySetter",
+           "MaterialApplySetter"]
 
 
 class Setter(Protocol):
@@ -40,19 +40,9 @@ class AttributeSetter:
 
 @dataclass(frozen=True)
 class PoseSetter:
-    """An object's pose: its mesh is moved rigidly (see ``docs/conventions.md``). The compiled
-    scene composes it with the object's placement, whose value it has recorded."""
-
-    obj: str
-
-    def __call__(self, compiled, value) -> None:
-        compiled.move_object(self.obj)
-
-
-@dataclass(frozen=True)
-class PlacementSetter:
-    """An object's placement on the ground plane: its mesh slides and turns about +y (see
-    ``docs/conventions.md``), composed with its pose."""
+    """An object's pose or placement: its mesh is moved rigidly (see ``docs/conventions.md``).
+    The compiled scene composes the two from the values it has recorded, so both parameters
+    share this setter."""
 
     obj: str
 

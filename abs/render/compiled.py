@@ -30,7 +30,7 @@ from abs.render.camera import Camera
 from abs.render.edges import MovingMesh, edge_adjacency, neighbour_mean
 from abs.render.environment import Environment
 from abs.render.integrator import PathTracer
-from abs.render.jit import from_numpy, opaque
+from abs.render.jit import from_numpy, in_use, opaque
 from abs.render.path_lengths import (DEFAULT_NODES, JOINT_NODES, MAX_MATERIALS,
                                      PathLengthRecording, length_bins, reweight)
 from abs.render.rotation import rotation_matrix
@@ -250,11 +250,8 @@ class CompiledScene:
 
     def _moved(self, obj: str) -> bool:
         """Whether object ``obj`` has a pose or placement that is non-zero or being differentiated."""
-        for field in OBJECT_FIELDS:
-            value = self.values.get(f"{obj}.{field}")
-            if value is not None and (dr.grad_enabled(value) or np.any(np.asarray(dr.detach(value)) != 0)):
-                return True
-        return False
+        values = (self.values.get(f"{obj}.{field}") for field in OBJECT_FIELDS)
+        return any(value is not None and in_use(value) for value in values)
 
     def move_object(self, obj: str) -> None:
         """Move object ``obj``'s mesh rigidly from where the scene file puts it by its recorded
@@ -264,6 +261,23 @@ class CompiledScene:
         (``docs/conventions.md``). :meth:`set` (``<obj>.pose``, ``<obj>.placement``) records a
         value and calls this."""
         pos, normals, centre = self._rest[obj]
+        positions = mi.Vector3f(*[from_numpy(mi.Float, pos[:, i]) for i in range(3)])
+        n = None if normals is None else self._normals(obj)
+        # Back at the null values (and detached) the mesh stays the loaded one bit for bit,
+        # which (p - c) + c in floating point is not.
+        if self._moved(obj):
+            rot, t = self._motion(obj)
+            c = mi.Vector3f(*[float(x) for x in centre])
+            positions = rot @ (positions - c) + c + t
+            n = None if n is None else rot @ n
+        sid = self.shape_ids[obj]
+        self._posed[obj] = dr.ravel(positions)
+        self.params[f"{sid}.vertex_positions"] = self._posed[obj]
+        if n is not None:
+            self.params[f"{sid}.vertex_normals"] = dr.ravel(n)
+
+    def _motion(self, obj: str) -> tuple[mi.Matrix3f, mi.Vector3f]:
+        """``(R(r_pose) R_y(ry), t_placement + t_pose)`` of object ``obj``'s recorded values."""
         zero = mi.Float(0.0)
         pose = self.values.get(f"{obj}.{POSE_FIELD}")
         placement = self.values.get(f"{obj}.{PLACEMENT_FIELD}")
@@ -278,18 +292,7 @@ class CompiledScene:
         if pose is not None:
             t = t + mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3)])
             rot = rotation_matrix(mi.Vector3f(*[dr.gather(mi.Float, pose, i) for i in range(3, 6)])) @ rot
-        c = mi.Vector3f(*[float(x) for x in centre])
-        p = mi.Vector3f(*[from_numpy(mi.Float, pos[:, i]) for i in range(3)])
-        moved = self._moved(obj)
-        # Back at the null values (and detached) the mesh is the loaded one bit for bit, which
-        # (p - c) + c in floating point is not.
-        positions = dr.ravel(rot @ (p - c) + c + t if moved else p)
-        self._posed[obj] = positions
-        sid = self.shape_ids[obj]
-        self.params[f"{sid}.vertex_positions"] = positions
-        if normals is not None:
-            n = self._normals(obj)
-            self.params[f"{sid}.vertex_normals"] = dr.ravel(rot @ n if moved else n)
+        return rot, t
 
     def set_difference_step(self, name: str, step: float) -> None:
         """Take ``name``'s derivative by central differences of ``step`` (its units) from now on

@@ -56,7 +56,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from abs.render.jit import from_numpy, opaque
+from abs.render.jit import from_numpy, in_use, opaque
 from abs.render.rotation import rotation_matrix
 from abs.scene.scene import CHROMIUM_IOR_RGB, CHROMIUM_K_RGB
 
@@ -166,7 +166,7 @@ class Environment:
         # bit for bit, without the three conductor Fresnel evaluations per lookup (about 5 % of
         # a render of the default scene).
         self._probe_c = value
-        self._probe_on = dr.grad_enabled(value) or bool(np.any(np.asarray(dr.detach(value)) != 0))
+        self._probe_on = in_use(value)
 
     def _probe_fresnel(self, v: mi.Vector3f) -> mi.Color3f:
         """``1 + c (F(cos_i) / F(1) - 1)`` for map-frame direction ``v`` (module docstring)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-__all__ = ["from_numpy", "opaque", "seed32"]
+__all__ = ["from_numpy", "in_use", "opaque", "seed32"]
 
 # Dr.Jit's LLVM backend wraps NumPy memory without copying and compiles the pointer's alignment
 # into the kernel (``align 64`` when the address happens to be a multiple of 64, else
@@ -27,6 +27,13 @@ def from_numpy(array_type, array, dtype=np.float32):
     aligned = buffer[start:start + flat.size]
     aligned[...] = flat
     return array_type(aligned)
+
+
+def in_use(value) -> bool:
+    """Whether a model extension's value is away from its null value of zeros or attached to the
+    AD graph (a derivative at the null value needs the extension traced): the test by which
+    costly extensions are skipped, bit for bit, at their null value."""
+    return dr.grad_enabled(value) or bool(np.any(np.asarray(dr.detach(value)) != 0.0))
 
 
 def opaque(array_type, *value):

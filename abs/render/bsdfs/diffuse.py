@@ -61,7 +61,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from abs.render.jit import opaque
+from abs.render.jit import in_use, opaque
 
 __all__ = ["DiffuseBSDF", "PLUGIN"]
 
@@ -144,8 +144,7 @@ class DiffuseBSDF(mi.BSDF):
         about 40 % of a render of a diffuse scene; either way the plain surface is bit for bit
         the same. Decided when the weights are written (``parameters_changed``), before any
         render traces the BSDF, and only a new write changes it."""
-        self.lobes = dr.grad_enabled(self.anisotropy) or bool(
-            np.any(np.asarray(dr.detach(self.anisotropy)) != 0.0))
+        self.lobes = in_use(self.anisotropy)
 
     # ------------------------------------------------------------ the lobe
     def _weights(self) -> tuple[mi.Float, mi.Float]:
