@@ -103,12 +103,13 @@ def test_scene_file_loads_writes_and_refuses_placement(tmp_path):
     plain = load_scene(_box_scene(tmp_path / "b"))
     assert "placement" not in write_scene(plain, tmp_path / "b" / "out.toml").read_text()
 
-    with pytest.raises(SceneError, match=r"objects\[0\].*placement"):
+    with pytest.raises(SceneError, match=r"scene\.toml: objects\[0\]\.placement: expected shape \[3\]"):
         load_scene(_box_scene(tmp_path / "c", "placement = [0.0, 0.0]"))
     bad = _box_scene(tmp_path / "d")
     bad.write_text(bad.read_text().replace('reflectance = [0.5, 0.5, 0.5]',
                                            'reflectance = [0.5, 0.5, 0.5]\nplacement = [0.0, 0.0, 0.0]'))
-    with pytest.raises(SceneError, match=r"may not have a field named 'placement'"):
+    with pytest.raises(SceneError, match=r"scene\.toml: materials\.paint\.placement: a material may not have a field "
+                                         r"named 'placement'"):
         load_scene(bad)
 
 
