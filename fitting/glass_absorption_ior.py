@@ -15,13 +15,17 @@ Why these settings:
 - **Coarse to fine** (``downsample_schedule``): a checkerboard seen through a sphere moves by
   more than a square when the IOR is 0.02 off, and a Gauss-Newton model of the sharp image then
   predicts little; box-averaged images (factor 4, then 2) find the basin.
-- **64 spp on the CPU, 256 on a GPU, 16 refinement steps**: renders through glass are noisy
-  (fireflies); the fit's objective is unbiased by that noise (two fixed-seed renders,
-  ``docs/fitting.md``), and the refinement's fresh renders average it out and measure it (the
-  standard errors include it). What is left is the noise of the estimate itself: the glass
-  suite's framed bowl fitted IOR 1.535 +- 0.015 at 64 spp on 2 cores (15.4 min on a machine
-  where an earlier 10.3-min run took 14.2); on an H100 the same fit takes about a minute, and at 256 spp (1.1 min) it gave IOR 1.5181 +- 0.0047 and
-  absorption 6.24, 2.52, 0.94 per metre for 1.52 and 6, 2.5, 1 (``SPP``).
+- **On the CPU 64 spp to find the basin, then 12 refinement steps at 256 spp; on a GPU 256
+  spp and 16 steps**: renders through glass are noisy (fireflies); the fit's objective is
+  unbiased by that noise (two fixed-seed renders, ``docs/fitting.md``), and the refinement's
+  fresh renders average it out and measure it (the standard errors include it). What is left is
+  the noise of the estimate itself, which the refinement's samples decide: with 16 steps at 64
+  spp the glass suite's framed bowl fitted IOR 1.539 +- 0.022 (its steps a random walk, as its
+  check said), with 12 at 256 spp 1.5171 +- 0.0035 and absorption 6.12, 2.39, 0.92 per metre
+  for 1.52 and 6, 2.5, 1, in 8.6 min on 2 cores (6.1 min before): a step's Newton target
+  through a thin wall is far less noisy at four times the samples, while Levenberg-Marquardt
+  only has to find the basin (``REFINEMENT``). On an H100 the fit at 256 spp takes about a
+  minute (IOR 1.5181 +- 0.0047, absorption 6.24, 2.52, 0.94).
 - **Four times the samples where the glass is seen** (``glass_spp_factor``): its refractions
   are the noisiest pixels and what the IOR is measured by; the rectangle around the glass costs
   a fraction of the image (``docs/fitting.md``).
@@ -61,12 +65,18 @@ from abs.render.variant import current_backend
 from abs.scene import load_scene
 from common import fit_stage, parser
 
-#: The glass suite's settings (benchmarks/glass_fit.py runs this recipe's settings), less spp.
+#: The glass suite's settings (benchmarks/glass_fit.py runs this recipe's settings), less spp
+#: and the refinement's.
 SETTINGS = dict(glass_spp_factor=4, downsample=2, downsample_schedule=((0, 4), (6, 2)), max_iterations=20,
-                refinement_steps=16, difference_steps="auto")
+                difference_steps="auto")
 #: Samples per pixel by Dr.Jit backend: on a GPU four times the CPU's samples still fit in about a
 #: minute, and they halve the estimate's Monte-Carlo noise.
 SPP = {"llvm": 64, "cuda": 256}
+#: The refinement's steps and samples per pixel by backend (None: ``SPP``'s). On 2 cores its 12
+#: steps at 256 spp cost about 2.5 more minutes than 16 at 64 and cut the framed bowl's IOR
+#: error from 0.019 to 0.003 (one run each; the module's docstring).
+REFINEMENT = {"llvm": dict(refinement_steps=12, refinement_spp=256),
+              "cuda": dict(refinement_steps=16, refinement_spp=None)}
 #: IORs the short fits start from: real glasses' range (abs.fitting.checks.PLAUSIBLE_RANGES,
 #: 1.45 to 1.8) in steps of 0.1, about the width of a basin at the coarse stage.
 IOR_STARTS = (1.45, 1.55, 1.65, 1.75)
@@ -75,8 +85,9 @@ IOR_STARTS = (1.45, 1.55, 1.65, 1.75)
 def settings(material: str = "glass", starts=IOR_STARTS) -> abs.FitSettings:
     """The recipe's :class:`abs.FitSettings` for the glass material ``material``, with short fits
     from the IORs ``starts`` first (``None`` or empty: from the scene's values only); spp by the
-    active variant's backend (``SPP``)."""
-    return abs.FitSettings(**SETTINGS, spp=SPP[current_backend()], tie=(f"{material}.ior",),
+    active variant's backend (``SPP``, ``REFINEMENT``)."""
+    backend = current_backend()
+    return abs.FitSettings(**SETTINGS, **REFINEMENT[backend], spp=SPP[backend], tie=(f"{material}.ior",),
                            starts=((f"{material}.ior", tuple(starts)),) if starts else ())
 
 

@@ -119,3 +119,19 @@ def test_short_fits_take_the_parameters_own_steps_or_the_given_ones():
     assert short_settings(FitSettings(difference_steps="auto")).difference_steps == ()
     given = (("glass.ior", 0.04),)
     assert short_settings(FitSettings(difference_steps=given)).difference_steps == given
+
+
+def test_the_refinement_renders_at_its_own_samples_per_pixel(small_scene_dir, capture):
+    """``refinement_spp`` changes the refinement's renders and nothing else: each refinement
+    step renders three times the samples at 12 spp as at the fit's 4 (the IOR's column by
+    central differences included)."""
+    def samples(steps, **kw):
+        settings = FitSettings(spp=4, max_iterations=2, refinement_steps=steps, tie=("glass.ior",),
+                               difference_steps=(("glass.ior", 0.04),), **kw)
+        return fit(small_scene_dir / "scene.toml", capture, ["glass.ior"], settings).summary()["samples_rendered"]
+
+    own = samples(2) - samples(1)
+    assert own > 0
+    assert samples(2, refinement_spp=12) - samples(1, refinement_spp=12) == 3 * own
+    with pytest.raises(ValueError, match="refinement_spp"):
+        FitSettings(refinement_spp=0)

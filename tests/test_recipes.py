@@ -56,7 +56,10 @@ def test_glass_recipe_takes_four_times_the_samples_on_a_gpu(monkeypatch):
         import glass_absorption_ior as recipe
     finally:
         sys.path.remove(str(RECIPES))
-    assert recipe.settings().spp == 64  # this machine: the LLVM (CPU) variant
+    cpu = recipe.settings()  # this machine: the LLVM (CPU) variant
+    # The CPU finds the basin at 64 spp and refines at 256 (the glass suite's framed bowl).
+    assert cpu.spp == 64 and cpu.refinement_spp == 256 and cpu.refinement_steps == 12
     monkeypatch.setattr(recipe, "current_backend", lambda: "cuda")
     cuda = recipe.settings()
     assert cuda.spp == 256 and cuda.glass_spp_factor == 4 and cuda.tie == ("glass.ior",)
+    assert cuda.refinement_spp is None and cuda.refinement_steps == 16

@@ -34,6 +34,8 @@ def add_parser(sub) -> None:
     p.add_argument("--refinement-steps", type=int, default=4,
                    help="Gauss-Newton steps on independent renders after Levenberg-Marquardt "
                         "(from path-length recordings: further independent seed pairs)")
+    p.add_argument("--refinement-spp", type=int, default=None,
+                   help="samples per pixel of the refinement's renders (default: --spp)")
     p.add_argument("--learning-rate", type=float, default=0.05, help="Adam step (typical steps)")
     p.add_argument("--spp-schedule", default="", help="Adam: ITER:SPP,... e.g. 0:4,20:16")
     p.add_argument("--downsample-schedule", default="", help="coarse to fine, Adam and LM: ITER:FACTOR,... e.g. 0:4,10:2,20:1")
@@ -103,7 +105,8 @@ def run(args) -> int:
         learning_rate=args.learning_rate, spp_schedule=parse_schedule(args.spp_schedule),
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
         seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts,
-        glass_spp_factor=args.glass_spp_factor, difference_steps=steps)
+        glass_spp_factor=args.glass_spp_factor, difference_steps=steps,
+        refinement_spp=args.refinement_spp)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)

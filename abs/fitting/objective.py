@@ -102,7 +102,7 @@ class Objective:
         return J
 
     def residuals(self, z: np.ndarray, seed: int, jacobian_seed: int | None = None,
-                  factor: int | None = None, names=None):
+                  factor: int | None = None, names=None, spp: int | None = None):
         """Weighted residuals at ``z`` and their Jacobian w.r.t. ``z``.
 
         Parameters
@@ -117,6 +117,8 @@ class Objective:
             coarse stage of Levenberg-Marquardt).
         names : sequence of str, optional
             Only these parameters' Jacobian columns (the others are zero).
+        spp : int, optional
+            Samples per pixel instead of the settings' ``spp`` (the refinement's).
 
         Returns
         -------
@@ -127,7 +129,7 @@ class Objective:
         """
         vector, s = self.vector, self.settings
         theta, dtheta = vector.to_physical(z), vector.derivative(z)
-        r, J = self.problem(factor).residuals(theta, s.spp, seed, jacobian=True,
+        r, J = self.problem(factor).residuals(theta, spp or s.spp, seed, jacobian=True,
                                               jacobian_seed=jacobian_seed, names=names)
         loss = float(np.sqrt(np.mean(r ** 2)))
         r = r / self.sigma
@@ -135,11 +137,12 @@ class Objective:
             r = np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
         return r, self._weighted_jacobian(J, dtheta), loss
 
-    def jacobian(self, z: np.ndarray, seed: int) -> np.ndarray:
+    def jacobian(self, z: np.ndarray, seed: int, spp: int | None = None) -> np.ndarray:
         """The weighted Jacobian alone, from renders seeded ``seed`` (a second, independent
-        Jacobian for the cross curvature)."""
+        Jacobian for the cross curvature), at ``spp`` samples per pixel (default: the
+        settings')."""
         theta = self.vector.to_physical(z)
-        J = self.problem().jacobian(theta, self.settings.spp, seed)
+        J = self.problem().jacobian(theta, spp or self.settings.spp, seed)
         return self._weighted_jacobian(J, self.vector.derivative(z))
 
     def gradient(self, z: np.ndarray, iteration: int) -> tuple[float, np.ndarray]:

@@ -67,6 +67,13 @@ class FitSettings:
         that Monte-Carlo noise puts into a least-squares fit of one noisy render; 0: none).
         Not run when every fitted parameter reweights from path-length recordings (absorption,
         environment scale, sensor): raise ``spp`` instead, which those fits pay once.
+    refinement_spp : int or None
+        Samples per pixel of the refinement's renders (default: ``spp``). The refinement's
+        estimate is an average of Newton targets whose noise is the renders'; where a column is
+        far noisier than its signal (an IOR seen through thin glass), fewer steps of more
+        samples average better than many of few (the steps' curvature and trust radius are
+        themselves noisy), and Levenberg-Marquardt, which only has to find the basin, keeps the
+        cheaper ``spp``.
     seed : int
         Base seed of all renders.
     reweight : bool
@@ -106,6 +113,7 @@ class FitSettings:
     rtol: float = 1e-4
     atol: float = 1e-6
     refinement_steps: int = 4
+    refinement_spp: int | None = None
     seed: int = 0
     tie: tuple[str, ...] = ()
     reweight: bool = True
@@ -122,6 +130,8 @@ class FitSettings:
                              f"not {self.method!r}")
         if self.spp < 1 or self.downsample < 1 or self.max_iterations < 1 or self.glass_spp_factor < 1:
             raise ValueError("spp, downsample, max_iterations and glass_spp_factor must be >= 1")
+        if self.refinement_spp is not None and self.refinement_spp < 1:
+            raise ValueError(f"refinement_spp must be >= 1 or None, not {self.refinement_spp}")
         for entry in self.starts:
             if (len(entry) != 2 or not isinstance(entry[0], str) or not len(entry[1])
                     or not all(np.isfinite(float(v)) for v in entry[1])):

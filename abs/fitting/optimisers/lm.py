@@ -180,9 +180,9 @@ class LevenbergMarquardt(Optimiser):
                 on_iteration(state)
 
         def fresh(z, iteration):  # independent seeds for r, J1 and J2 at every refinement step
-            base = settings.seed + 10_000 * iteration
-            r, J1, loss = objective.residuals(z, base + 1, base + 2)
-            return r, (J1, objective.jacobian(z, base + 3)), loss
+            base, spp = settings.seed + 10_000 * iteration, settings.refinement_spp
+            r, J1, loss = objective.residuals(z, base + 1, base + 2, spp=spp)
+            return r, (J1, objective.jacobian(z, base + 3, spp=spp)), loss
 
         if objective.reweighted:
             return recording_pairs(objective, state, settings, on_iteration)
