@@ -68,7 +68,8 @@ class FitSettings:
         Not run when every fitted parameter reweights from path-length recordings (absorption,
         environment scale, sensor): raise ``spp`` instead, which those fits pay once.
     refinement_spp : int or None
-        Samples per pixel of the refinement's renders (default: ``spp``). The refinement's
+        Samples per pixel of the Gauss-Newton refinement's renders (default: ``spp``; fits
+        wholly from path-length recordings use ``spp`` for their seed pairs). The refinement's
         estimate is an average of Newton targets whose noise is the renders'; where a column is
         far noisier than its signal (an IOR seen through thin glass), fewer steps of more
         samples average better than many of few (the steps' curvature and trust radius are
