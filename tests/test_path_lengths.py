@@ -271,3 +271,29 @@ def test_joint_binning_of_known_paths_including_overflow():
                   - reweight(recording, sigma - h * tangent, 1.0)[0])[0, 0] / (2 * h)
     # Exact for each material's own overflow; across materials the overflow's mean is held.
     np.testing.assert_allclose(derivative, difference, rtol=0.02)
+
+
+def test_evenly_spread_lengths_reweight_without_the_interpolation_bias():
+    """Tent binning interpolates exp(-sigma L) linearly between nodes, which overestimates it by
+    b^2 / 12 on average over light spread evenly between two nodes (b = sigma * spacing); the
+    nodes' weights divide that out. Light in glass beyond the first node (whose node 0 also holds
+    the light that never entered glass, and is left alone) reweights to the exact sum within a
+    twentieth of that bias; without the weights the error is the bias, up to 6 %."""
+    rng = np.random.default_rng(5)
+    bins = length_bins(0.1, 8)
+    n = 200_000
+    lengths = rng.uniform(bins.spacing, bins.spacing * (bins.n_nodes - 1), n)
+    light = rng.uniform(0.5, 1.0, (n, 3))
+    histogram = dr.zeros(mi.Float, 3 * bins.slots)
+    bin_light(histogram, mi.UInt32(np.zeros(n, np.uint32)), mi.Color3f(light.T), [mi.Float(lengths)],
+              (bins,))
+    recording = PathLengthRecording(histogram.numpy().reshape(1, 1, 3, -1), (bins,), ("glass",),
+                                    np.zeros((1, 3)), 1.0, 1, 0)
+    sigma = np.array([4.0, 8.0, 16.0])
+    exact = (light * np.exp(-np.outer(lengths, sigma))).sum(0)
+    image, derivative = reweight(recording, sigma, 1.0, d_absorption=np.ones(3))
+    bias = (sigma * bins.spacing) ** 2 / 12
+    assert np.all(bias > 3e-3)  # the uncorrected error would be seen
+    np.testing.assert_array_less(np.abs(image[0, 0] / exact - 1.0), bias / 20)
+    d_exact = -(light * lengths[:, None] * np.exp(-np.outer(lengths, sigma))).sum(0)
+    np.testing.assert_array_less(np.abs(derivative[0, 0] / d_exact - 1.0), bias / 5)

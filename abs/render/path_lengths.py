@@ -19,7 +19,9 @@ Binning. Lengths are recorded on ``n_nodes`` equally spaced nodes ``L_k = k * sp
 (tent) interpolation: light at length ``L`` between nodes ``k`` and ``k + 1`` is split between
 them in proportion to its distance from each. Reweighting then evaluates ``exp(-dsigma L)`` at the
 nodes, which is linear interpolation of the exponential: its relative error is at most
-``(dsigma * spacing)^2 / 8`` (0.4 % for ``dsigma = 10 /m`` at 18 mm spacing). Paths never in glass
+``(dsigma * spacing)^2 / 8`` (0.4 % for ``dsigma = 10 /m`` at 18 mm spacing) and always of one
+sign (the exponential is convex), ``(dsigma * spacing)^2 / 12`` on average over light spread
+evenly between nodes, which the nodes' weights divide out (all but node 0's). Paths never in glass
 sit exactly on node 0. Light beyond the last node (long internal bounces, rare and faint) goes to
 an overflow pair per pixel and channel, its sum and its length-weighted sum, and is reweighted at
 its mean length. Memory: ``(n_nodes + 2)`` floats per pixel and channel.
@@ -191,9 +193,24 @@ def _contract(a: np.ndarray, bins: LengthBins, change: np.ndarray, derivative: b
     its sum. Returns the result and the mean used."""
     nodes = bins.n_nodes
     lengths = np.arange(nodes) * bins.spacing
-    weights = np.exp(-change[:, None] * lengths[None, :])  # (3, nodes)
+    # Tent binning evaluates exp(-change L) by linear interpolation between nodes, which
+    # overestimates the convex exponential: for light spread evenly between two nodes the
+    # interpolated sum is (b/2) coth(b/2) = 1 + b^2/12 + ... times the exact one (b = change *
+    # spacing). Weights c = tanh(b/2) / (b/2) on the nodes divide that out (measured on the glass
+    # suite's sphere-1.62, recording against a render with the same samples: the glass's pixels
+    # 0.007, 0.04 and 0.11 % too bright in R, G, B without it, 20x less with it). Node 0 keeps
+    # weight 1: its light is mostly paths that never entered glass, at exactly L = 0.
+    half = 0.5 * change * bins.spacing  # (3,)
+    small = np.abs(half) < 1e-4
+    safe = np.where(small, 1.0, half)
+    correction = np.where(small, 1.0 - half ** 2 / 3.0, np.tanh(half) / safe)
+    inside = np.arange(nodes)[None, :] > 0
+    exact = np.exp(-change[:, None] * lengths[None, :])  # (3, nodes)
+    weights = exact * np.where(inside, correction[:, None], 1.0)
     if derivative:
-        weights = -weights * lengths
+        d_correction = 0.5 * bins.spacing * np.where(
+            small, -2.0 * half / 3.0, (half / np.cosh(half) ** 2 - np.tanh(half)) / safe ** 2)
+        weights = -weights * lengths + exact * np.where(inside, d_correction[:, None], 0.0)
     middle = "defgh"[:a.ndim - 4]  # the other materials' axes, still to be contracted
     node_light = np.einsum(f"yxc{middle}k,ck->yxc{middle}", a[..., :nodes],
                            weights.astype(a.dtype))
