@@ -205,12 +205,12 @@ def _contract(a: np.ndarray, bins: LengthBins, change: np.ndarray, derivative: b
     safe = np.where(small, 1.0, half)
     correction = np.where(small, 1.0 - half ** 2 / 3.0, np.tanh(half) / safe)
     inside = np.arange(nodes)[None, :] > 0
-    exact = np.exp(-change[:, None] * lengths[None, :])  # (3, nodes)
-    weights = exact * np.where(inside, correction[:, None], 1.0)
+    at_nodes = np.exp(-change[:, None] * lengths[None, :])  # (3, nodes)
+    weights = at_nodes * np.where(inside, correction[:, None], 1.0)
     if derivative:
         d_correction = 0.5 * bins.spacing * np.where(
             small, -2.0 * half / 3.0, (half / np.cosh(half) ** 2 - np.tanh(half)) / safe ** 2)
-        weights = -weights * lengths + exact * np.where(inside, d_correction[:, None], 0.0)
+        weights = -weights * lengths + at_nodes * np.where(inside, d_correction[:, None], 0.0)
     middle = "defgh"[:a.ndim - 4]  # the other materials' axes, still to be contracted
     node_light = np.einsum(f"yxc{middle}k,ck->yxc{middle}", a[..., :nodes],
                            weights.astype(a.dtype))
