@@ -671,6 +671,45 @@ def part_end_to_end_blur() -> dict:
     return out
 
 
+def part_end_to_end_footprint() -> dict:
+    """``end_to_end_blur``'s comparison with the build's exact processing: captures now carry
+    ``processing`` (the sensor's camera, demosaicing and CFA pattern), and fits render the sensor
+    sites and apply the build's own weights (:mod:`abs.acquisition.footprint`). In one run: the
+    simulated capture, the bilinear build (footprint) at downsample 1 and 2, the same build
+    fitted through ``blur_px``'s Gaussian instead (``processing`` removed), and the superpixel
+    build (footprint). Raw brackets with noise seed 3, 128 samples per pixel, the same start."""
+    t0 = time.perf_counter()
+    cfg = {**E2E, "fit_spp": 128}
+    scene_path, scene, compiled, views, truth = _e2e_setup()
+    gain = cfg["gain_dn_per_s"]
+    out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=2, noise_seed=3)
+        runs = (("simulate", "simulated", 1.0, 1),
+                ("built_from_raw", "bilinear", gain, 1),
+                ("built_from_raw_gaussian", "gaussian", gain, 1),
+                ("built_from_raw_downsample2", "bilinear", gain, 2),
+                ("built_from_raw_superpixel", "superpixel", gain, 1))
+        for label, folder, unit, ds in runs:
+            out[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
+            print(label, np.round(out[label]["glass_absorption_error"], 2),
+                  np.round(out[label]["glass_absorption_stderr"], 2),
+                  round(out[label]["seconds"]), flush=True)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def part_end_to_end_footprint_replicates() -> dict:
+    """``end_to_end_footprint``'s captures with the replicate seeds: the simulated capture, the
+    bilinear build through its footprint and through ``blur_px``, the superpixel build."""
+    gain = E2E["gain_dn_per_s"]
+    return _replicates({**E2E, "fit_spp": 128},
+                       (("simulate", "simulated", 1.0, 1), ("built_from_raw", "bilinear", gain, 1),
+                        ("built_from_raw_gaussian", "gaussian", gain, 1),
+                        ("built_from_raw_superpixel", "superpixel", gain, 1)))
+
+
 def part_end_to_end_blur_render_seeds() -> dict:
     """``end_to_end_blur``'s bilinear build (blur modelled) and its simulated reference with other
     seeds for the scene renders behind the raw brackets (``end_to_end`` uses 500 + view; every
@@ -725,8 +764,10 @@ def part_end_to_end_blur_replicates() -> dict:
 def _e2e_captures(tmp: Path, scene, compiled, views, cfg: dict, simulate_seed: int,
                   noise_seed: int) -> dict:
     """The end-to-end captures in ``tmp``: ``simulated`` (``abs simulate``), the ``bilinear``
-    and ``superpixel`` builds of the raw brackets, and ``unblurred`` (the bilinear build without
-    ``blur_px``). Returns the two builds' ``blur_px``."""
+    and ``superpixel`` builds of the raw brackets (with their ``processing``: fits render the
+    sensor sites, :mod:`abs.render.footprint`), ``gaussian`` (the bilinear build without
+    ``processing``: fits blur by ``blur_px``) and ``unblurred`` (without either). Returns the two
+    builds' ``blur_px``."""
     from abs.acquisition.build import build_capture
     from abs.io.capture import save_capture
     from abs.simulate import simulate_capture
@@ -737,7 +778,10 @@ def _e2e_captures(tmp: Path, scene, compiled, views, cfg: dict, simulate_seed: i
     raw = _e2e_raw_brackets(compiled, views, tmp / "raw", cfg, noise_seed=noise_seed)
     bilinear, _ = build_capture(raw / "build.json", tmp / "bilinear")
     superpixel, _ = build_capture(raw / "build.json", tmp / "superpixel", demosaic="superpixel")
-    save_capture(tmp / "unblurred", bilinear.views, blur_px=[0, 0, 0])
+    # Without the build's processing: the renderer draws sharp pixels (unblurred) or blurs them
+    # by blur_px's Gaussian (gaussian), as readers that ignore ``processing`` do.
+    save_capture(tmp / "unblurred", bilinear.views, blur_px=[0, 0, 0], processing={})
+    save_capture(tmp / "gaussian", bilinear.views, processing={})
     return {"bilinear": list(bilinear.views[0].blur_px),
             "superpixel": list(superpixel.views[0].blur_px)}
 
@@ -920,7 +964,9 @@ PARTS = {"real_stereo": part_real_stereo, "real_hdr": part_real_hdr,
          "end_to_end_replicates": part_end_to_end_replicates,
          "end_to_end_blur": part_end_to_end_blur,
          "end_to_end_blur_replicates": part_end_to_end_blur_replicates,
-         "end_to_end_blur_render_seeds": part_end_to_end_blur_render_seeds}
+         "end_to_end_blur_render_seeds": part_end_to_end_blur_render_seeds,
+         "end_to_end_footprint": part_end_to_end_footprint,
+         "end_to_end_footprint_replicates": part_end_to_end_footprint_replicates}
 
 
 def _f(v, fmt="{:.3f}") -> str:
@@ -1037,6 +1083,19 @@ def write_markdown(results: dict, path: Path) -> None:
         lines.append("| | blur_px written by the builds (R, G, B) | bilinear "
                      + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["bilinear"]) + "; superpixel "
                      + ", ".join(f"{b:.3f}" for b in eb["blur_px"]["superpixel"]) + " | |")
+    ef = parts.get("end_to_end_footprint")
+    if ef:
+        notes = {"built_from_raw": "processing rendered exactly (footprint)",
+                 "built_from_raw_gaussian": "the same build through blur_px (processing removed)",
+                 "built_from_raw_downsample2": "footprint, fitted at downsample 2",
+                 "built_from_raw_superpixel": "footprint; 64x48 capture, fitted at downsample 1"}
+        for label in ("simulate", "built_from_raw", "built_from_raw_gaussian",
+                      "built_from_raw_downsample2", "built_from_raw_superpixel"):
+            x = ef[label]
+            lines.append(
+                f"| {'end to end, the build processing rendered exactly (one run)' if label == 'simulate' else ''} "
+                f"| {label}: environment.scale error; glass.absorption error (1/m) | "
+                + _scale_and_absorption_errors(x) + f" | {notes.get(label, '')} |")
     rs = parts.get("end_to_end_blur_render_seeds")
     if rs:
         for key in ("700", "900"):
@@ -1047,7 +1106,9 @@ def write_markdown(results: dict, path: Path) -> None:
                 + _absorption_errors(x) + " | the renders behind the raw frames (500 elsewhere) |")
     for part, heading in (("end_to_end_replicates", "same, {n} more noise seeds"),
                           ("end_to_end_blur_replicates",
-                           "capture blur modelled, {n} more noise seeds")):
+                           "capture blur modelled, {n} more noise seeds"),
+                          ("end_to_end_footprint_replicates",
+                           "processing rendered exactly, {n} more noise seeds")):
         rp = parts.get(part)
         if not rp:
             continue

@@ -22,9 +22,11 @@ camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture
 (optional): an image of the photographs' size, drawn on the *original* (distorted) frames,
 nonzero where pixels are compared; it is undistorted with the image (nearest neighbour, and
 pixels that fall outside the original frame are left out) and written as the view's mask.
-The capture's ``blur_px`` is the blur that this demosaicing and undistortion add
-(:func:`abs.acquisition.blur.processing_blur`, its variance averaged over the views), so that fits
-blur their renderings alike.
+The capture's ``processing`` records, per view, the sensor's calibrated camera, the demosaicing
+method and the CFA pattern, so that fits render each built pixel as the average of exactly the
+sensor sites it was made from (:mod:`abs.acquisition.footprint`). Its ``blur_px`` is the blur that
+this demosaicing and undistortion add (:func:`abs.acquisition.blur.processing_blur`, its variance
+averaged over the views): what readers that ignore ``processing`` blur their renderings by.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from abs.acquisition.raw import read_raw
 from abs.acquisition.undistort import (pinhole_K, superpixel_camera, undistort_image,
                                        undistort_mask)
 from abs.errors import InputError, read_json
-from abs.io.capture import Capture, save_capture
+from abs.io.capture import Capture, SensorProcessing, save_capture
 from abs.io.images import read_image, read_mask
 
 __all__ = ["build_capture", "load_frame"]
@@ -175,7 +177,7 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                           f"{', '.join(DEMOSAIC_METHODS)}, got "
                                                           f"{demosaic!r}")
     superpixel = demosaic == "superpixel"
-    views, images, masks, merges, blurs, blur_keys = [], {}, {}, {}, {}, []
+    views, images, masks, merges, blurs, blur_keys, processing = [], {}, {}, {}, {}, [], {}
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
         if not isinstance(entry, dict):
@@ -211,6 +213,12 @@ def build_capture(build_file: str | Path, out: str | Path,
             except ValueError as exc:
                 raise InputError(source, f"{field}.camera", f"{entry['camera']}: {exc}") from None
         blur_keys.append(key)
+        pattern = None
+        if raw:
+            first = next(f for f in entry["frames"] if Path(f).suffix.lower() != ".exr")
+            pattern = read_raw(folder / first).cfa_pattern or cfa
+        processing[entry["name"]] = SensorProcessing(
+            cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern)
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
@@ -225,4 +233,5 @@ def build_capture(build_file: str | Path, out: str | Path,
     # One blur per capture: the views' variances averaged (variance is what sets the blur).
     blur_px = (np.sqrt(np.mean([np.square(blurs[k]) for k in blur_keys], axis=0)) if blur_keys
                else np.zeros(3))
-    return save_capture(out, views, images, masks or None, blur_px=blur_px), merges
+    return save_capture(out, views, images, masks or None, blur_px=blur_px,
+                        processing=processing), merges

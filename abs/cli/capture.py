@@ -48,7 +48,9 @@ def run(args) -> int:
             args.report.mkdir(parents=True, exist_ok=True)
             write_weight_png(args.report / f"{name}_weight.png", merged.weight)
     blur = capture.views[0].blur_px
-    print(f"processing blur (blur_px, fits blur their renderings alike): R {blur[0]:.2f}, "
+    print("processing (demosaicing, undistortion): written per view; fits render the sensor "
+          "sites and apply the build's weights")
+    print(f"processing blur (blur_px, for readers without it): R {blur[0]:.2f}, "
           f"G {blur[1]:.2f}, B {blur[2]:.2f} px")
     print(f"wrote {len(capture.views)} views to {args.out}")
     return 0

@@ -6,7 +6,10 @@ A capture folder holds ``cameras.json`` next to the photographs::
                 "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],
                 "R": [[...], [...], [...]], "t": [tx, ty, tz],
                 "holdout": false, "mask": "v0_mask.png"}],
-     "blur_px": [0.8, 0.65, 0.8]}
+     "blur_px": [0.8, 0.65, 0.8],
+     "processing": {"v0": {"width": 1280, "height": 1024, "K": [[...], [...], [...]],
+                           "distortion": [k1, k2, p1, p2, k3], "demosaic": "bilinear",
+                           "cfa_pattern": "RGGB"}}}
 
 - ``name``: unique, usable as a file name (letters, digits, ``_``, ``-``, ``.``; not starting
   with ``.`` or ``-``; at most 128 characters).
@@ -21,6 +24,14 @@ A capture folder holds ``cameras.json`` next to the photographs::
   footprint, in every view (``abs capture build`` writes its demosaicing and undistortion's,
   docs/acquisition.md). Renderings are blurred alike before they are compared. Readers that
   ignore it (unknown top-level keys are ignored) compare unblurred renderings, as before.
+- ``processing`` (optional, top level): per view name, how ``abs capture build`` made the
+  photograph from its camera's sensor: the sensor's size (pixels), its calibrated matrix ``K``
+  and OpenCV ``distortion`` coefficients (4, 5, 8, 12 or 14), the ``demosaic`` method
+  (``"bilinear"``, ``"superpixel"``, or ``null`` for frames that were RGB already) and the
+  ``cfa_pattern`` (``RGGB``, ``BGGR``, ``GRBG``, ``GBRG``; ``null`` without demosaicing). With
+  it, renderings of the view average exactly the sensor sites each built pixel averages
+  (:mod:`abs.acquisition.footprint`) instead of being blurred by ``blur_px``. Readers that ignore
+  it use ``blur_px``.
 
 Keys of a view starting with ``_`` are comments and ignored; other unknown keys are errors, so a
 typo such as ``holdOut`` cannot silently change meaning. Unknown top-level keys are ignored.
@@ -34,7 +45,7 @@ import json
 import os
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -44,13 +55,18 @@ from abs.errors import CaptureError, InputError, read_json
 from abs.io.images import (IMAGE_EXTENSIONS, image_size, read_image, read_mask, write_exr,
                            write_mask)
 
-__all__ = ["CAMERAS_FILE", "View", "Capture", "load_capture", "save_capture"]
+__all__ = ["CAMERAS_FILE", "View", "Capture", "SensorProcessing", "load_capture", "save_capture"]
 
 CAMERAS_FILE = "cameras.json"
 ROTATION_TOL = 1e-5  # max |R^T R - I| and |det R - 1| accepted as a rotation
 _NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
 _VIEW_KEYS = {"name", "image", "K", "R", "t", "holdout", "mask"}
 _REQUIRED_KEYS = ("name", "image", "K", "R", "t")
+_PROCESSING_KEYS = {"width", "height", "K", "distortion", "demosaic", "cfa_pattern"}
+# The demosaicing methods of abs.acquisition.demosaic (None: frames that were RGB already) and
+# Bayer patterns, repeated here because file formats sit below the acquisition code.
+_DEMOSAIC = ("bilinear", "superpixel", None)
+_CFA = ("RGGB", "BGGR", "GRBG", "GBRG")
 
 
 # --------------------------------------------------------------------------------------------
@@ -126,6 +142,42 @@ def _check_blur(value: Any, source: Path | None, field: str) -> tuple[float, flo
     return tuple(float(b) for b in blur)
 
 
+def _check_processing(value: Any, source: Path | None, field: str) -> "SensorProcessing":
+    if not isinstance(value, Mapping):
+        raise CaptureError(source, field, f"expected an object, got {type(value).__name__}")
+    unknown = sorted(k for k in value if k not in _PROCESSING_KEYS and not k.startswith("_"))
+    if unknown:
+        raise CaptureError(source, f"{field}.{unknown[0]}", f"unknown key; allowed keys are "
+                                                            f"{', '.join(sorted(_PROCESSING_KEYS))}")
+    for key in ("width", "height", "K", "distortion", "demosaic"):
+        if key not in value:
+            raise CaptureError(source, f"{field}.{key}", "missing")
+    size = []
+    for key in ("width", "height"):
+        n = value[key]
+        if isinstance(n, bool) or not isinstance(n, int) or n <= 0:
+            raise CaptureError(source, f"{field}.{key}", f"expected a positive whole number of "
+                                                         f"sensor pixels, got {n!r}")
+        size.append(n)
+    K = _check_K(value["K"], source, f"{field}.K")
+    distortion = value["distortion"]
+    n = len(distortion) if isinstance(distortion, (list, tuple)) else -1
+    if n not in (4, 5, 8, 12, 14):
+        raise CaptureError(source, f"{field}.distortion", f"expected 4, 5, 8, 12 or 14 OpenCV "
+                                                          f"coefficients, got {distortion!r}")
+    distortion = _matrix(distortion, (n,), source, f"{field}.distortion")
+    demosaic = value["demosaic"]
+    if demosaic not in _DEMOSAIC:
+        raise CaptureError(source, f"{field}.demosaic", f"expected \"bilinear\", \"superpixel\" "
+                                                        f"or null, got {demosaic!r}")
+    pattern = value.get("cfa_pattern")
+    if demosaic is not None and pattern not in _CFA:
+        raise CaptureError(source, f"{field}.cfa_pattern", f"expected one of {', '.join(_CFA)} "
+                                                           f"(demosaic {demosaic}), got {pattern!r}")
+    return SensorProcessing(size[0], size[1], _read_only(K), _read_only(distortion), demosaic,
+                            None if demosaic is None else pattern)
+
+
 def _read_only(arr: np.ndarray) -> np.ndarray:
     arr = np.array(arr, dtype=np.float64)
     arr.setflags(write=False)
@@ -134,6 +186,46 @@ def _read_only(arr: np.ndarray) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------------
 # Data model
+
+
+@dataclass(frozen=True, eq=False)
+class SensorProcessing:
+    """How a capture build made a view's photograph from its camera's sensor (``cameras.json``'s
+    optional top-level ``processing``): enough to rebuild, with the build's own functions, which
+    sensor sites each built pixel averages (:func:`abs.acquisition.footprint.processing_footprint`).
+
+    Attributes
+    ----------
+    width, height : int
+        The sensor's size, pixels.
+    K : np.ndarray
+        (3, 3) the calibrated (distorted) camera's matrix at the sensor's resolution, pixels.
+    distortion : np.ndarray
+        OpenCV distortion coefficients ``k1, k2, p1, p2[, k3, ...]``.
+    demosaic : str or None
+        ``"bilinear"`` or ``"superpixel"``; ``None`` for frames that were RGB already (linear EXR
+        brackets: undistortion only).
+    cfa_pattern : str or None
+        The Bayer pattern of the raw frames (``None`` without demosaicing).
+    """
+
+    width: int
+    height: int
+    K: np.ndarray
+    distortion: np.ndarray
+    demosaic: str | None
+    cfa_pattern: str | None = None
+
+    def key(self) -> tuple:
+        """The values as a hashable tuple (equal processings have equal keys)."""
+        return (self.width, self.height, tuple(np.asarray(self.K, float).ravel()),
+                tuple(np.asarray(self.distortion, float).ravel()), self.demosaic, self.cfa_pattern)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"width": int(self.width), "height": int(self.height),
+                "K": np.asarray(self.K, float).tolist(),
+                "distortion": np.asarray(self.distortion, float).tolist(),
+                "demosaic": self.demosaic, "cfa_pattern": self.cfa_pattern}
 
 
 @dataclass(frozen=True, eq=False)
@@ -161,6 +253,9 @@ class View:
     blur_px : tuple of 3 float
         The photograph's processing blur per R, G, B (Gaussian standard deviation, pixels; the
         capture file's top-level ``blur_px``).
+    processing : SensorProcessing or None
+        How a capture build made the photograph from the sensor (``processing[name]``), or
+        ``None``.
     """
 
     name: str
@@ -173,6 +268,7 @@ class View:
     holdout: bool = False
     mask: Path | None = None
     blur_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    processing: SensorProcessing | None = None
 
     def __post_init__(self) -> None:
         where = f"View({self.name!r})"
@@ -347,6 +443,18 @@ def load_capture(folder: str | Path) -> Capture:
                                                            f"(also views[{seen[view.name]}])")
         seen[view.name] = i
         parsed.append(view)
+    processing = data.get("processing")
+    if processing is not None:
+        if not isinstance(processing, dict):
+            raise CaptureError(source, "processing", f"expected an object of view names, got "
+                                                     f"{type(processing).__name__}")
+        for name in processing:
+            if name not in seen:
+                raise CaptureError(source, f"processing.{name}", "no view has this name")
+        parsed = [view if view.name not in processing else
+                  replace(view, processing=_check_processing(processing[view.name], source,
+                                                             f"processing.{view.name}"))
+                  for view in parsed]
     return Capture(folder=folder, views=tuple(parsed))
 
 
@@ -382,7 +490,8 @@ def _json_view(view: View, folder: Path) -> str:
 def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                  images: Mapping[str, np.ndarray] | None = None,
                  masks: Mapping[str, np.ndarray] | None = None,
-                 blur_px: Sequence[float] | None = None) -> Capture:
+                 blur_px: Sequence[float] | None = None,
+                 processing: Mapping[str, SensorProcessing] | None = None) -> Capture:
     """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks and
     ``cameras.json`` (written last, atomically), then load it back.
 
@@ -402,6 +511,9 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     blur_px : sequence of 3 float, optional
         The photographs' processing blur per R, G, B (pixels; top-level ``blur_px``). Default:
         that of the :class:`View` items (which must agree), zeros when all are mappings.
+    processing : mapping of str to SensorProcessing, optional
+        How the photographs were made from the sensor, per view name (top-level
+        ``processing``). Default: that of the :class:`View` items that have one.
 
     Returns
     -------
@@ -426,6 +538,11 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                                                 "capture has one: give blur_px")
         blur_px = blurs.pop() if blurs else (0.0, 0.0, 0.0)
     blur_px = _check_blur(blur_px, None, "blur_px")
+    if processing is None:
+        processing = {v.name: v.processing for v in views
+                      if isinstance(v, View) and v.processing is not None}
+    processing = {name: _check_processing(p.to_json(), None, f"processing.{name}")
+                  for name, p in processing.items()}
 
     # Validate everything before writing anything.
     prepared: list[tuple[dict[str, Any], np.ndarray, np.ndarray | None]] = []
@@ -482,7 +599,7 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
         elif isinstance(item, View) and item.mask is not None:
             mask = item.read_mask()
         prepared.append((spec, rgb, mask))
-    for what, given in (("images", images), ("masks", masks)):
+    for what, given in (("images", images), ("masks", masks), ("processing", processing)):
         if unused := sorted(set(given) - seen):
             raise CaptureError(None, f"{what}[{unused[0]!r}]", "no view has this name")
 
@@ -496,12 +613,16 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
             mask_path = folder / f"{spec['name']}_mask.png"
             write_mask(mask_path, mask)
         saved.append(View(image=image_path, width=rgb.shape[1], height=rgb.shape[0],
-                          mask=mask_path, **spec))
+                          mask=mask_path, processing=processing.get(spec["name"]), **spec))
 
     text = '{\n  "views": [\n' + ",\n".join(_json_view(v, folder) for v in saved) + "\n  ]"
     if any(blur_px):
         # Only when there is a blur: captures without one stay as every reader knows them.
         text += f',\n  "blur_px": {json.dumps(list(blur_px))}'
+    if processing:
+        entries = ",\n".join(f"    {json.dumps(name)}: {json.dumps(p.to_json())}"
+                             for name, p in processing.items())
+        text += ',\n  "processing": {\n' + entries + "\n  }"
     text += "\n}\n"
     tmp = folder / f".{CAMERAS_FILE}.tmp"
     tmp.write_text(text, encoding="utf-8")

@@ -39,4 +39,4 @@ def downsample_camera(camera: Camera, factor: int) -> Camera:
     shift = -(factor - 1) / (2.0 * factor)
     S = np.array([[1.0 / factor, 0.0, shift], [0.0, 1.0 / factor, shift], [0.0, 0.0, 1.0]])
     return Camera(S @ camera.K, camera.R, camera.t, camera.width // factor, camera.height // factor,
-                  camera.block * factor, camera.blur_px)
+                  camera.block * factor, camera.blur_px, footprint=camera.footprint)

@@ -7,12 +7,14 @@ matrices project silhouette edges for visibility gradients (:mod:`abs.render.edg
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from abs.acquisition.footprint import Footprint, processing_footprint
+from abs.render.footprint import footprint_film
 from abs.render.jit import opaque
 
 __all__ = ["Camera", "SampleBoost"]
@@ -69,6 +71,12 @@ class Camera:
         (:meth:`abs.render.sensor.Sensor.apply`); zeros for none.
     boost : SampleBoost or None
         Pixels that take more samples than the others (inside the image).
+    footprint : Footprint or None
+        The sensor sites each full-resolution pixel averages, when the photographs were built
+        from a sensor whose processing the capture describes (:mod:`abs.acquisition.footprint`):
+        the sites are rendered from samples in their squares and the pixels made from them with
+        the build's weights (:mod:`abs.render.footprint`), instead of the tent filter; ``blur_px``
+        is then zero and ``boost`` ``None``. Pose gradients (edge sampling) do not support it.
     """
 
     K: np.ndarray
@@ -79,21 +87,45 @@ class Camera:
     block: int = 1
     blur_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
     boost: SampleBoost | None = None
+    footprint: Footprint | None = field(default=None, compare=False)
 
     def __post_init__(self):
         b = self.boost
         if b is not None and (b.x1 > self.width or b.y1 > self.height):
             raise ValueError(f"sample boost {b} reaches outside the {self.width}x{self.height} image")
+        fp = self.footprint
+        if fp is not None:
+            if (fp.width < self.width * self.block or fp.height < self.height * self.block):
+                raise ValueError(f"a footprint of {fp.width}x{fp.height} pixels cannot serve a "
+                                 f"{self.width}x{self.height} camera of blocks of {self.block}")
+            if self.boost is not None:
+                raise ValueError("a camera with a footprint renders sensor sites: it takes no "
+                                 "sample boost")
+            if any(self.blur_px):
+                raise ValueError("a camera with a footprint draws the processing exactly: its "
+                                 f"blur_px must be zero, not {self.blur_px}")
 
     def samples(self, spp: int) -> int:
-        """Camera samples (lanes) of a render at ``spp``: the boosted pixels' extra ones too."""
+        """Camera samples (lanes) of a render at ``spp``: the boosted pixels' extra ones too, or
+        the sensor sites' under a footprint."""
+        if self.footprint is not None:
+            film = footprint_film(self.footprint, self.block, self.width, self.height)
+            return film.sites * film.site_spp(spp)
         extra = 0 if self.boost is None else self.boost.pixels * (self.boost.factor - 1)
         return (self.width * self.height + extra) * spp
 
     @classmethod
     def from_view(cls, view) -> "Camera":
-        """From a :class:`abs.io.capture.View` (its photograph's blur included)."""
-        return cls(np.asarray(view.K, float), np.asarray(view.R, float), np.asarray(view.t, float),
+        """From a :class:`abs.io.capture.View`: its photograph's processing drawn exactly when
+        the capture describes it (``view.processing``: a footprint), else blurred by its
+        ``blur_px``."""
+        K = np.asarray(view.K, float)
+        if view.processing is not None:
+            footprint = _footprint(view.processing.key(), view.processing, tuple(K.ravel()),
+                                   int(view.width), int(view.height))
+            return cls(K, np.asarray(view.R, float), np.asarray(view.t, float), int(view.width),
+                       int(view.height), footprint=footprint)
+        return cls(K, np.asarray(view.R, float), np.asarray(view.t, float),
                    int(view.width), int(view.height), 1, tuple(float(s) for s in view.blur_px))
 
     @property
@@ -118,3 +150,19 @@ class Camera:
         _, _, k, r = self._mats()
         q = k @ (r @ p + opaque(mi.Vector3f, *self.t.tolist()))
         return q.x / q.z, q.y / q.z
+
+
+_FOOTPRINTS: dict[tuple, Footprint] = {}
+_FOOTPRINTS_KEPT = 32
+
+
+def _footprint(key: tuple, processing, K: tuple, width: int, height: int) -> Footprint:
+    """One footprint per distinct processing and camera (``key``, ``K`` and size): views of one
+    camera share it, and a fit's repeated ``from_view`` does not measure it again."""
+    full_key = (key, K, width, height)
+    if full_key not in _FOOTPRINTS:
+        if len(_FOOTPRINTS) >= _FOOTPRINTS_KEPT:
+            _FOOTPRINTS.pop(next(iter(_FOOTPRINTS)))
+        _FOOTPRINTS[full_key] = processing_footprint(processing, np.reshape(K, (3, 3)), width,
+                                                     height)
+    return _FOOTPRINTS[full_key]

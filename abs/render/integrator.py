@@ -36,7 +36,10 @@ Three modes and a replay, one loop body (:meth:`PathTracer._step`):
 Pieces:
 
 - Pixels: sample positions are drawn from a tent filter of radius 1 pixel around each pixel centre
-  (each pixel integrates ``tent(x - p) L(x)``).
+  (each pixel integrates ``tent(x - p) L(x)``). A camera with a footprint (photographs built from a
+  sensor, :mod:`abs.acquisition.footprint`) renders the sensor's sites instead, each from samples
+  in its square, and makes its pixels from them with the build's own weights
+  (:mod:`abs.render.footprint`): the build's demosaicing and undistortion, exactly.
 - Dispersion: a path carries all three colour channels until it first meets glass whose IOR
   differs between channels (or is being differentiated). There it picks one channel uniformly,
   keeps only that channel with weight 3 (an unbiased estimate of the three), and refracts with
@@ -74,6 +77,7 @@ from abs.render.bsdfs.dielectric import DielectricBSDF
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
+from abs.render.footprint import footprint_film
 from abs.render.jit import opaque, seed32
 from abs.render.path_lengths import bin_light
 
@@ -252,14 +256,18 @@ class PathTracer:
         """
         split = self._split(scene, dispersion)
         with dr.suspend_grad():
-            sampler, ray, _, _ = self._camera_rays(camera, spp, seed)
+            sampler, ray, _, _, film = self._camera_rays(camera, spp, seed)
             radiance, _ = self.trace(scene, env, ray, sampler, split, "primal")
             dr.eval(radiance)
-            image = self._film(radiance, camera, spp)
+            image = self._film(radiance, camera, spp, film)
         weight = adjoint(image).array
-        sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
-        inv_spp = opaque(mi.Float, 1.0 / spp) * (1.0 if share is None else share)
-        per_sample = mi.Color3f(*[dr.gather(mi.Float, weight, pixel * 3 + c) * inv_spp for c in range(3)])
+        sampler, ray, pixel, share, film = self._camera_rays(camera, spp, seed)
+        if film is not None:
+            per_sample = film.adjoint(weight, pixel, spp)
+        else:
+            inv_spp = opaque(mi.Float, 1.0 / spp) * (1.0 if share is None else share)
+            per_sample = mi.Color3f(*[dr.gather(mi.Float, weight, pixel * 3 + c) * inv_spp
+                                      for c in range(3)])
         self._trace_adjoint(scene, env, ray, sampler, split, radiance, per_sample)
         return image
 
@@ -314,7 +322,7 @@ class PathTracer:
         targets = tuple(opaque(mi.UInt32, dr.reinterpret_array(mi.UInt32, mi.BSDFPtr(g))[0])
                         for g in glasses)
         with dr.suspend_grad():
-            sampler, ray, pixel, share = self._camera_rays(camera, spp, seed)
+            sampler, ray, pixel, share, film = self._camera_rays(camera, spp, seed)
             state = (sampler, ray, mi.Color3f(1.0), mi.Bool(True), mi.Float(1.0), mi.Bool(True),
                      mi.UInt32(0), tuple(mi.Float(0.0) for _ in targets), mi.Color3f(1.0))
 
@@ -327,7 +335,15 @@ class PathTracer:
                     glass_ids=targets, roulette=roulette)
                 # This vertex's light has been attenuated along ``lengths``; the segment that
                 # ended here (if in a glass) attenuates the light of the vertices after it.
-                bin_light(histogram, pixel, light if share is None else light * share, lengths, bins)
+                if film is None:
+                    bin_light(histogram, pixel, light if share is None else light * share, lengths,
+                              bins)
+                else:
+                    # Every pixel that uses this lane's site, with its weight, channel by channel.
+                    for c, target, w in film.splats(pixel, spp):
+                        one = [mi.Float(0.0)] * 3
+                        one[c] = light[c] * w
+                        bin_light(histogram, target, mi.Color3f(*one), lengths, bins)
                 return (sampler, ray, beta, active, prev_pdf, prev_delta, depth + 1,
                         tuple(a + b for a, b in zip(lengths, glass_lengths)), roulette)
 
@@ -343,6 +359,10 @@ class PathTracer:
         if moving and camera.block > 1:
             raise NotImplementedError("pose and placement gradients (edge sampling) need block == 1: "
                                       "fit them without --downsample")
+        if moving and camera.footprint is not None:
+            raise NotImplementedError("pose and placement gradients (edge sampling) integrate the "
+                                      "tent filter, not a capture's sensor footprint: fit them on a "
+                                      "capture without 'processing' (blur_px is used then)")
 
     @staticmethod
     def _split(scene: mi.Scene, dispersion: str) -> bool:
@@ -368,8 +388,10 @@ class PathTracer:
         extra lanes of a :class:`~abs.render.camera.SampleBoost` (``spp * (factor - 1)``
         consecutive ones per boosted pixel, row by row).
 
-        Returns ``(sampler, ray, pixel, share)``: ``share`` is each lane's weight relative to
-        ``1 / spp`` (``1 / factor`` in boosted pixels), ``None`` without a boost. The same
+        Returns ``(sampler, ray, pixel, share, film)``: ``share`` is each lane's weight relative
+        to ``1 / spp`` (``1 / factor`` in boosted pixels), ``None`` without a boost; ``film`` the
+        camera's :class:`~abs.render.footprint.FootprintFilm` when it has a footprint (then
+        ``pixel`` is each lane's sensor site), else ``None``. The same
         ``(camera, spp, seed)`` gives the same rays and the same sampler state, which path replay
         relies on; the lanes of the unboosted pixels are those of the camera without the boost.
         """
@@ -389,6 +411,11 @@ class PathTracer:
             j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, spp * (boost.factor - 1))
             pixel = dr.select(extra, _boosted_pixel(boost, j, width), pixel)
             share = dr.select(_in_boost(boost, pixel, width), opaque(mi.Float, 1.0 / boost.factor), 1.0)
+        if camera.footprint is not None:
+            film = footprint_film(camera.footprint, camera.block, w, h)
+            site, u, v = film.positions(sampler, lane, spp)
+            origin, d = camera.rays(u, v)
+            return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), site, None, film
         px = mi.Float(pixel % width)
         py = mi.Float(pixel // width)
         offset = sampler.next_2d()
@@ -402,22 +429,24 @@ class PathTracer:
             dx = (pick.x - (b - 1) / 2 + dx) / b
             dy = (pick.y - (b - 1) / 2 + dy) / b
         origin, d = camera.rays(px + dx, py + dy)
-        return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel, share
+        return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), pixel, share, None
 
     def _render_pass(self, scene, env, camera, spp, seed, split, mode):
-        sampler, ray, _, _ = self._camera_rays(camera, spp, seed)
+        sampler, ray, _, _, film = self._camera_rays(camera, spp, seed)
         radiance, tangent = self.trace(scene, env, ray, sampler, split, mode)
         # Evaluate all channels in one launch: reducing channel by channel from the unevaluated
         # loop would run the whole path-tracing kernel once per channel.
         dr.eval(radiance, tangent)
-        images = [self._film(radiance, camera, spp)]
-        images.append(self._film(tangent, camera, spp) if tangent is not None else None)
+        images = [self._film(radiance, camera, spp, film)]
+        images.append(self._film(tangent, camera, spp, film) if tangent is not None else None)
         return images
 
     @staticmethod
-    def _film(radiance: mi.Color3f, camera: Camera, spp: int) -> mi.TensorXf:
+    def _film(radiance: mi.Color3f, camera: Camera, spp: int, film=None) -> mi.TensorXf:
         """Each pixel's estimate from its lanes (:meth:`_camera_rays`)."""
         w, h = camera.width, camera.height
+        if film is not None:
+            return film.film(radiance, spp, w, h)
         inv_spp = opaque(mi.Float, 1.0 / spp)
         flat = dr.zeros(mi.Float, w * h * 3)
         lane = dr.arange(mi.UInt32, w * h)
