@@ -6,6 +6,7 @@ leaves structured errors (the demosaic's aliasing, the resampling's uneven blur)
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -20,6 +21,7 @@ from abs.errors import CaptureError
 from abs.io.capture import SensorProcessing, load_capture, save_capture
 from abs.model.downsampling import downsample, downsample_camera
 from abs.render import Camera
+from abs.render.camera import SampleBoost
 from abs.render.footprint import _tables
 from conftest import sphere_in_view
 
@@ -46,6 +48,11 @@ def test_footprint_reproduces_the_build(method):
     expected = undistort_image(rgb, built, K_new)
     got = footprint.expected(np.repeat(raw.reshape(-1, 1), 3, 1))
     np.testing.assert_allclose(got, expected, atol=1e-6)  # the build computes in float32
+    # A point of a site's square (as the renderer samples it) is found in that site (as edge
+    # sampling splats it), through the calibrated distortion.
+    offsets = np.random.default_rng(1).uniform(-0.49, 0.49, footprint.site_center.shape)
+    points = footprint.site_center + np.einsum("kij,kj->ki", footprint.site_jacobian, offsets)
+    np.testing.assert_array_equal(footprint.site_at(points), np.arange(len(points)))
     # The sites' squares land where the built pixels sample them: the weighted mean position of
     # a pixel's sites is the pixel (to the resampling's and demosaic's half-site offsets).
     P = footprint.weights[1]
@@ -114,10 +121,13 @@ def footprint_view(small_scene_dir):
     return compiled, Camera(K_new, pinhole.R, pinhole.t, W, H, footprint=fp)
 
 
-def test_replay_equals_forward_mode_under_a_footprint(footprint_view):
+@pytest.mark.parametrize("boosted", [False, True])
+def test_replay_equals_forward_mode_under_a_footprint(footprint_view, boosted):
     """Path replay's adjoint goes through the build's weights transposed: it agrees with forward
-    mode sample for sample."""
+    mode sample for sample (also where a sample boost gives some sites more samples)."""
     compiled, camera = footprint_view
+    if boosted:
+        camera = replace(camera, boost=SampleBoost(6, 4, 16, 12, 3))
     weights = np.random.default_rng(0).uniform(-1, 1, (camera.height, camera.width, 3))
     image, gradient = compiled.render_backward(camera, weights, ["glass.absorption"], spp=8, seed=4,
                                                max_depth=6)
@@ -132,13 +142,16 @@ def test_replay_equals_forward_mode_under_a_footprint(footprint_view):
     assert np.any(np.abs(gradient["glass.absorption"]) > 0)
 
 
-@pytest.mark.parametrize("factor", [1, 2])
-def test_recording_is_the_render_under_a_footprint(footprint_view, factor):
+@pytest.mark.parametrize("variant", ["plain", "downsampled", "boosted"])
+def test_recording_is_the_render_under_a_footprint(footprint_view, variant):
     """A path-length recording splats each sample into every pixel that uses its site: reweighted
     at its own absorption it is the render with the same samples (also downsampled, where a
-    site takes a quarter of the samples per pixel)."""
+    site takes a quarter of the samples per pixel, and with a sample boost)."""
     compiled, camera = footprint_view
-    camera = downsample_camera(camera, factor)
+    if variant == "downsampled":
+        camera = downsample_camera(camera, 2)
+    elif variant == "boosted":
+        camera = replace(camera, boost=SampleBoost(6, 4, 16, 12, 3))
     recording = compiled.record(camera, spp=16, seed=5,
                                 absorption_per_m=compiled.get("glass.absorption"))
     direct = compiled.render(camera, spp=16, seed=5).numpy()
@@ -163,7 +176,7 @@ def test_downsampled_footprint_averages_the_full_resolution_weights():
     assert camera.footprint is fp and camera.block == 2
 
 
-def test_capture_processing_round_trip_and_errors(tmp_path):
+def test_capture_processing_round_trip_and_errors(tmp_path, monkeypatch):
     K = np.array([[50.0, 0, 15.5], [0, 50.0, 11.5], [0, 0, 1]])
     processing = SensorProcessing(32, 24, K, DIST, "bilinear", "RGGB")
     image = np.ones((24, 32, 3), np.float32)
@@ -174,6 +187,11 @@ def test_capture_processing_round_trip_and_errors(tmp_path):
     camera = Camera.from_view(view)
     assert camera.footprint is not None and camera.blur_px == (0.0, 0.0, 0.0)
     assert load_capture(tmp_path / "c").views[0].processing.demosaic == "bilinear"
+    # A sensor too large for a footprint falls back to blur_px, saying so.
+    monkeypatch.setattr("abs.render.camera.MAX_SENSOR_PIXELS", 32 * 24 - 1)
+    with pytest.warns(UserWarning, match="too large.*blur_px"):
+        assert Camera.from_view(view).footprint is None
+    monkeypatch.undo()
     data = json.loads((tmp_path / "c" / "cameras.json").read_text())
     for change, field in ((lambda p: p.update(demosaic="ahd"), "processing.v0.demosaic"),
                           (lambda p: p.update(cfa_pattern="RGBG"), "processing.v0.cfa_pattern"),
@@ -191,3 +209,45 @@ def test_capture_processing_round_trip_and_errors(tmp_path):
     (tmp_path / "c" / "cameras.json").write_text(json.dumps(broken))
     with pytest.raises(CaptureError, match="no view has this name"):
         load_capture(tmp_path / "c")
+
+
+def test_a_sample_boost_gives_its_sites_more_samples_and_changes_nothing_else(footprint_view):
+    """Boosted sites average ``factor`` times the samples: the boosted pixels' noise falls, the
+    image's expectation does not move."""
+    compiled, camera = footprint_view
+    boosted = replace(camera, boost=SampleBoost(6, 4, 16, 12, 4))
+    assert boosted.samples(8) > camera.samples(8)
+    plain = np.array([compiled.render(camera, spp=8, seed=s).numpy() for s in range(6)])
+    more = np.array([compiled.render(boosted, spp=8, seed=s).numpy() for s in range(6)])
+    inside = (slice(6, 10), slice(8, 14))  # pixels whose sites are all boosted
+    assert np.std(more, 0)[inside].mean() < 0.75 * np.std(plain, 0)[inside].mean()
+    reference = compiled.render(camera, spp=512, seed=99).numpy()
+    for images in (plain, more):
+        assert abs(float(np.mean(images.mean(0) - reference))) < 0.01
+
+
+def test_pose_gradient_under_a_footprint(silhouette_scene_dir):
+    """Edge sampling splats a moving silhouette's boundary term into the sensor site whose square
+    holds each edge point, then through the build's weights: forward mode with edges agrees with
+    finite differences of footprint renders (an unlit sphere before a uniform environment: the
+    boundary term is the whole gradient)."""
+    from abs.camera.pinhole import intrinsics_from_fov, look_at
+    from abs.render import compile_scene
+    from abs.scene import load_scene
+    from gradcheck import assert_gradients_agree, directional_gradient
+
+    compiled = compile_scene(load_scene(silhouette_scene_dir / "scene.toml"))
+    R, t = look_at(np.array([0.0, 0.05, 0.35]), np.array([0.0, 0.05, 0.0]))
+    cam = CameraModel(24, 24, intrinsics_from_fov(24, 24, np.radians(25)), DIST, np.eye(3), np.zeros(3))
+    K_new = pinhole_K(cam)
+    fp = processing_footprint(SensorProcessing(24, 24, cam.K, DIST, "bilinear", "RGGB"), K_new, 24, 24)
+    camera = Camera(K_new, R, t, 24, 24, footprint=fp)
+    import mitsuba as mi
+    # Ramps, so the boundary terms of opposite edges add rather than cancel (steeper weights make
+    # the finite differences' own step error show).
+    v, u = np.mgrid[0:24, 0:24] / 23.0
+    weights = mi.TensorXf(np.repeat((u + 2 * v)[..., None], 3, axis=2).astype(np.float32))
+    for direction in ([1, 0, 0, 0, 0, 0], [0, 1, 0, 0, 0, 0]):
+        res = directional_gradient(compiled, camera, "sphere.pose", direction, 0.003, weights,
+                                   max_depth=1, spp=128, seeds=4)
+        assert_gradients_agree(*res, rel=0.1)

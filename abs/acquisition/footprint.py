@@ -46,7 +46,12 @@ from abs.acquisition.demosaic import SUPERPIXEL_FROM_FULL, demosaic
 from abs.acquisition.undistort import remap_bilinear, superpixel_camera, undistortion_maps
 from abs.io.capture import SensorProcessing
 
-__all__ = ["Footprint", "processing_footprint"]
+__all__ = ["MAX_SENSOR_PIXELS", "Footprint", "processing_footprint"]
+
+#: Sensors of more pixels are not given a footprint (Camera.from_view falls back to ``blur_px``,
+#: with a warning): measuring one takes about 0.8 kB of memory per sensor pixel at its peak and
+#: 10 s per megapixel (1280 x 1024: 1.1 GB, 12 s), and the renderer's tables hold about as much.
+MAX_SENSOR_PIXELS = 2048 * 2048
 
 # Probe lattice spacing (sensor pixels): more than a built pixel's reach (4 sites), even so that
 # each probe keeps one CFA colour.
@@ -69,6 +74,10 @@ class Footprint:
         ``[-1/2, 1/2]^2`` on the sensor maps to ``center + J @ offset``.
     weights : tuple of 3 scipy.sparse.csr_matrix
         ``P_R, P_G, P_B``, each ``(height * width, S)``: built pixel (row-major) from sites.
+    processing : SensorProcessing
+        What the build did (the sensor's camera, demosaicing, CFA pattern).
+    K_new : np.ndarray
+        (3, 3) the built image's pinhole camera, pixels.
     """
 
     width: int
@@ -76,6 +85,22 @@ class Footprint:
     site_center: np.ndarray
     site_jacobian: np.ndarray
     weights: tuple
+    processing: SensorProcessing
+    K_new: np.ndarray
+
+    def site_at(self, xy: np.ndarray) -> np.ndarray:
+        """The sensor site (index into ``site_center``) whose square holds each built-image point
+        ``xy`` (``(N, 2)``, pixels), ``-1`` off the sensor: the point projected through the
+        calibrated distortion (``cv2.projectPoints``) and rounded to the nearest site."""
+        xy = np.asarray(xy, np.float64).reshape(-1, 2)
+        rays = np.linalg.solve(self.K_new, np.column_stack([xy, np.ones(len(xy))]).T).T
+        sensor, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                                      np.asarray(self.processing.K, np.float64),
+                                      np.asarray(self.processing.distortion, np.float64))
+        sx, sy = np.round(sensor.reshape(-1, 2)).astype(np.int64).T
+        w, h = self.processing.width, self.processing.height
+        on = (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h)
+        return np.where(on, sy * w + sx, -1)
 
     def expected(self, site_values: np.ndarray) -> np.ndarray:
         """The built image ``(H, W, 3)`` of sites whose squares' mean light is ``site_values``
@@ -172,13 +197,15 @@ def processing_footprint(processing: SensorProcessing, K_new: np.ndarray, width:
             inside = (sx >= 0) & (sx < processing.width) & (sy >= 0) & (sy < processing.height)
             if np.any(reached & ~inside):
                 raise AssertionError("a built pixel responds to a site outside the sensor")
-            rows.append(pixels[reached])
-            cols.append((sy * processing.width + sx)[reached].astype(np.int64))
-            values.append(out[reached])
+            rows.append(pixels[reached].astype(np.int32))
+            cols.append((sy * processing.width + sx)[reached].astype(np.int32))
+            values.append(out[reached].astype(np.float32))  # the build's weights are float32
     rows, cols, values = np.concatenate(rows), np.concatenate(cols), np.concatenate(values)
     shape = (width * height, n_sites)
-    weights = tuple(sparse.csr_matrix((values[:, c], (rows, cols)), shape=shape) for c in range(3))
-    for P in weights:
-        P.eliminate_zeros()
+    weights = []
+    for c in range(3):
+        used = values[:, c] != 0.0
+        weights.append(sparse.csr_matrix((values[used, c], (rows[used], cols[used])), shape=shape))
+    weights = tuple(weights)
     center, jacobian = _sites_in_built_image(camera, K_new)
-    return Footprint(width, height, center, jacobian, weights)
+    return Footprint(width, height, center, jacobian, weights, processing, K_new)

@@ -77,12 +77,12 @@ def boost_where_seen(observation: Observation, bounds, factor: int) -> Observati
     ``bounds`` (``(lower, upper)`` world corners, m; a scene's glass objects) are seen: the
     rectangle around their projected corners, :data:`BOOST_MARGIN_PX` wider, cut to the image.
 
-    Unchanged for ``factor`` 1, no boxes, boxes that reach behind the camera (no rectangle
-    bounds what such a box covers) or lie outside the image, and cameras that render a capture's
-    sensor sites (a footprint: its samples go to sites, not pixels).
+    Unchanged for ``factor`` 1, no boxes, or boxes that reach behind the camera (no rectangle
+    bounds what such a box covers) or lie outside the image. A camera that renders a capture's
+    sensor sites (a footprint) boosts the sites the rectangle's pixels use.
     """
     camera = observation.camera
-    if factor <= 1 or not bounds or camera.footprint is not None:
+    if factor <= 1 or not bounds:
         return observation
     corners = np.array([c for lo, hi in bounds for c in itertools.product(*zip(lo, hi))], float)
     in_camera = corners @ camera.R.T + np.ravel(camera.t)

@@ -7,13 +7,14 @@ matrices project silhouette edges for visibility gradients (:mod:`abs.render.edg
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from abs.acquisition.footprint import Footprint, processing_footprint
+from abs.acquisition.footprint import MAX_SENSOR_PIXELS, Footprint, processing_footprint
 from abs.render.footprint import footprint_film
 from abs.render.jit import opaque
 
@@ -76,7 +77,7 @@ class Camera:
         from a sensor whose processing the capture describes (:mod:`abs.acquisition.footprint`):
         the sites are rendered from samples in their squares and the pixels made from them with
         the build's weights (:mod:`abs.render.footprint`), instead of the tent filter; ``blur_px``
-        is then zero and ``boost`` ``None``. Pose gradients (edge sampling) do not support it.
+        is then zero and a ``boost`` boosts the sites its pixels use.
     """
 
     K: np.ndarray
@@ -98,9 +99,6 @@ class Camera:
             if (fp.width < self.width * self.block or fp.height < self.height * self.block):
                 raise ValueError(f"a footprint of {fp.width}x{fp.height} pixels cannot serve a "
                                  f"{self.width}x{self.height} camera of blocks of {self.block}")
-            if self.boost is not None:
-                raise ValueError("a camera with a footprint renders sensor sites: it takes no "
-                                 "sample boost")
             if any(self.blur_px):
                 raise ValueError("a camera with a footprint draws the processing exactly: its "
                                  f"blur_px must be zero, not {self.blur_px}")
@@ -109,10 +107,13 @@ class Camera:
         """Camera samples (lanes) of a render at ``spp``: the boosted pixels' extra ones too, or
         the sensor sites' under a footprint."""
         if self.footprint is not None:
-            film = footprint_film(self.footprint, self.block, self.width, self.height)
-            return film.sites * film.site_spp(spp)
+            return self.film().lanes(spp)
         extra = 0 if self.boost is None else self.boost.pixels * (self.boost.factor - 1)
         return (self.width * self.height + extra) * spp
+
+    def film(self):
+        """The :class:`~abs.render.footprint.FootprintFilm` of a camera with a footprint."""
+        return footprint_film(self.footprint, self.block, self.width, self.height, self.boost)
 
     @classmethod
     def from_view(cls, view) -> "Camera":
@@ -120,8 +121,15 @@ class Camera:
         the capture describes it (``view.processing``: a footprint), else blurred by its
         ``blur_px``."""
         K = np.asarray(view.K, float)
-        if view.processing is not None:
-            footprint = _footprint(view.processing.key(), view.processing, tuple(K.ravel()),
+        processing = view.processing
+        if processing is not None and processing.width * processing.height > MAX_SENSOR_PIXELS:
+            warnings.warn(f"view {view.name}: the {processing.width}x{processing.height} sensor "
+                          f"is too large to render its sites (more than {MAX_SENSOR_PIXELS} "
+                          "pixels): its processing is approximated by blur_px's Gaussian",
+                          stacklevel=2)
+            processing = None
+        if processing is not None:
+            footprint = _footprint(processing.key(), processing, tuple(K.ravel()),
                                    int(view.width), int(view.height))
             return cls(K, np.asarray(view.R, float), np.asarray(view.t, float), int(view.width),
                        int(view.height), footprint=footprint)

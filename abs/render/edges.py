@@ -7,7 +7,8 @@ the (continuous) interior misses. For a pixel filter ``k`` the term is
 
     d/dtheta I_p = integral over silhouette edges of k(x - p) (L_minus - L_plus) (dx/dtheta . n) dl
 
-with ``n`` the edge's unit normal in the image and ``L_plus``, ``L_minus`` the radiance just on
+with ``n`` the edge's unit normal in the image (for a camera with a footprint, ``k`` is a
+sensor site's square, then the build's weights: :mod:`abs.render.footprint`) and ``L_plus``, ``L_minus`` the radiance just on
 either side. We sample points on the projected silhouette edges in proportion to their length,
 estimate both radiances with the path tracer (detached), and attach the edge point's image
 position to the parameters through the mesh's attached vertex positions. The returned image is
@@ -162,6 +163,21 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
     # Opaque: the silhouette's length changes with the pose and must not become a kernel literal.
     contribution = difference * velocity * opaque(mi.Float, total / n_samples)
 
+    if camera.footprint is not None:
+        # Into the sensor site whose square holds the edge point (a site's value is its square's
+        # mean), then to pixels with the build's weights (abs.render.footprint).
+        film = camera.film()
+        site, inverse_area = film.sites_at(x)
+        inside = site >= 0
+        index = from_numpy(mi.UInt32, np.where(inside, site, 0), np.uint32)
+        weight = from_numpy(mi.Float, inverse_area)
+        inside_mask = from_numpy(mi.Bool, inside, np.bool_)
+        values = []
+        for value in (contribution.x, contribution.y, contribution.z):
+            sites = dr.zeros(mi.Float, film.sites)
+            dr.scatter_add(sites, value * weight, index, inside_mask)
+            values.append(sites)
+        return film.image(values, w, h)
     # Splat through the tent pixel filter (the same filter the renderer integrates with).
     fx, fy = np.floor(x[:, 0]), np.floor(x[:, 1])
     for dx in (0, 1):

@@ -14,9 +14,11 @@ colours.)
 
 Everything here is linear in the sites' values, so derivatives pass through unchanged: the
 forward-mode tangent is filmed like the radiance, path replay's adjoint is ``P^T`` of the image's
-adjoint, and a path-length recording bins each sample's light into every pixel that uses its site,
-with that pixel's weight. Downsampled cameras (``block > 1``) average the full-resolution rows of
-``P`` over each block. The tables are built once per footprint and block (NumPy) and copied to
+adjoint, a path-length recording bins each sample's light into every pixel that uses its site,
+with that pixel's weight, and edge sampling puts a moving silhouette's boundary term into the site
+whose square holds each edge point (:meth:`FootprintFilm.sites_at`). Downsampled cameras (``block > 1``) average the full-resolution rows of
+``P`` over each block; a sample boost gives its factor to every site a pixel of its rectangle
+uses. The tables are built once per footprint and block (NumPy) and copied to
 Dr.Jit once per variant.
 """
 
@@ -50,8 +52,8 @@ def _padded_rows(matrix: sparse.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
     """A CSR matrix's rows as ``(columns, values)`` padded with (0, 0.0) to the longest row."""
     counts = np.diff(matrix.indptr)
     n = max(int(counts.max()) if counts.size else 0, 1)
-    cols = np.zeros((matrix.shape[0], n), np.int64)
-    vals = np.zeros((matrix.shape[0], n), np.float64)
+    cols = np.zeros((matrix.shape[0], n), np.int32)
+    vals = np.zeros((matrix.shape[0], n), np.float32)
     slot = np.arange(matrix.nnz) - np.repeat(matrix.indptr[:-1], counts)
     row = np.repeat(np.arange(matrix.shape[0]), counts)
     cols[row, slot] = matrix.indices
@@ -93,7 +95,7 @@ class FootprintFilm:
     Use :func:`footprint_film` (cached per footprint, block and variant).
     """
 
-    def __init__(self, footprint: Footprint, block: int, width: int, height: int):
+    def __init__(self, footprint: Footprint, block: int, width: int, height: int, boost=None):
         t = _tables(footprint, block, width, height)
         self.block = block
         self.sites = len(t.sites)
@@ -103,21 +105,54 @@ class FootprintFilm:
             # Full-resolution positions -> the downsampled camera's (abs.model.downsampling).
             shift = (block - 1) / 2.0
             c, j = (c - shift) / block, j / block
+        self._footprint = footprint
+        self._local = np.full(footprint.site_center.shape[0], -1, np.int64)
+        self._local[t.sites] = np.arange(self.sites)
+        self._area = np.abs(np.linalg.det(j))  # a site's square in the camera's pixels^2
         self.cx, self.cy = from_numpy(mi.Float, c[:, 0]), from_numpy(mi.Float, c[:, 1])
         self.j = [[from_numpy(mi.Float, j[:, r, k]) for k in range(2)] for r in range(2)]
         self.forward = [(from_numpy(mi.UInt32, idx, np.uint32), from_numpy(mi.Float, w), idx.shape[1])
                         for idx, w in t.forward]
         self.transpose = [(from_numpy(mi.UInt32, pix, np.uint32), from_numpy(mi.Float, w), pix.shape[1])
                           for pix, w in t.transpose]
+        # A sample boost (abs.render.camera.SampleBoost) multiplies the samples of every site
+        # that a pixel of its rectangle uses; those sites' extra lanes follow all ordinary ones.
+        self.factor = 1 if boost is None else int(boost.factor)
+        boosted = np.zeros(0, np.int64)
+        if boost is not None:
+            rows = np.arange(width * height).reshape(height, width)[boost.y0:boost.y1, boost.x0:boost.x1]
+            boosted = np.unique(np.concatenate([idx[rows.ravel()][w[rows.ravel()] != 0]
+                                                for idx, w in t.forward]))
+        self.boosted = len(boosted)
+        factor = np.ones(self.sites)
+        factor[boosted] = self.factor
+        self.boosted_sites = from_numpy(mi.UInt32, boosted if len(boosted) else np.zeros(1), np.uint32)
+        self.site_factor = from_numpy(mi.Float, factor)
 
     def site_spp(self, spp: int) -> int:
-        """Samples per site for ``spp`` samples per pixel: the same samples in all."""
+        """Samples per (unboosted) site for ``spp`` samples per pixel: the same samples in all."""
         return max(1, int(round(spp * self.pixels / self.sites)))
 
+    def lanes(self, spp: int) -> int:
+        """Lanes of a render at ``spp``: every site's, then the boosted sites' extra ones."""
+        per = self.site_spp(spp)
+        return self.sites * per + self.boosted * per * (self.factor - 1)
+
+    def _inverse_count(self, site: mi.UInt32, spp: int) -> mi.Float:
+        """``1 /`` the number of samples of each lane's site."""
+        return opaque(mi.Float, 1.0 / self.site_spp(spp)) / dr.gather(mi.Float, self.site_factor, site)
+
     def positions(self, sampler: mi.Sampler, lane: mi.UInt32, spp: int):
-        """Each lane's site (``site_spp`` consecutive lanes per site) and a uniform point in its
-        square, in the camera's pixel coordinates."""
-        site = lane // opaque(mi.UInt32, self.site_spp(spp))
+        """Each lane's site (``site_spp`` consecutive lanes per site, then ``site_spp *
+        (factor - 1)`` per boosted site) and a uniform point in its square, in the camera's pixel
+        coordinates."""
+        per = self.site_spp(spp)
+        site = lane // opaque(mi.UInt32, per)
+        if self.boosted:
+            base = opaque(mi.UInt32, self.sites * per)
+            extra = lane >= base
+            j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, per * (self.factor - 1))
+            site = dr.select(extra, dr.gather(mi.UInt32, self.boosted_sites, j), site)
         offset = sampler.next_2d() - 0.5
         x = (dr.gather(mi.Float, self.cx, site) + dr.gather(mi.Float, self.j[0][0], site) * offset.x
              + dr.gather(mi.Float, self.j[0][1], site) * offset.y)
@@ -125,14 +160,42 @@ class FootprintFilm:
              + dr.gather(mi.Float, self.j[1][1], site) * offset.y)
         return site, x, y
 
+    def _site_means(self, value: mi.Float, spp: int) -> mi.Float:
+        """Each site's mean of its lanes' ``value`` (block sums: the same samples give the same
+        image, bit for bit)."""
+        per = self.site_spp(spp)
+        if not self.boosted:
+            return dr.block_sum(value, per) * opaque(mi.Float, 1.0 / per)
+        ordinary = dr.block_sum(dr.gather(mi.Float, value, dr.arange(mi.UInt32, self.sites * per)), per)
+        more = per * (self.factor - 1)
+        lanes = opaque(mi.UInt32, self.sites * per) + dr.arange(mi.UInt32, self.boosted * more)
+        extra = dr.zeros(mi.Float, self.sites)
+        dr.scatter(extra, dr.block_sum(dr.gather(mi.Float, value, lanes), more), self.boosted_sites)
+        count = opaque(mi.Float, per) * self.site_factor
+        return (ordinary + extra) / count
+
     def film(self, radiance: mi.Color3f, spp: int, width: int, height: int) -> mi.TensorXf:
         """The camera's image from the lanes' radiance: sites' means, then the build's weights."""
-        per = self.site_spp(spp)
-        inv = opaque(mi.Float, 1.0 / per)
+        return self.image([self._site_means(value, spp)
+                           for value in (radiance.x, radiance.y, radiance.z)], width, height)
+
+    def sites_at(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For points ``xy`` (``(N, 2)``, the camera's pixels): the rendered site whose square
+        holds each (``-1`` for none) and ``1 /`` that square's area in the camera's pixels^2 (a
+        site's value is the mean over its square)."""
+        xy = np.asarray(xy, np.float64)
+        if self.block > 1:
+            xy = xy * self.block + (self.block - 1) / 2.0  # the full-resolution image's pixels
+        site = self._footprint.site_at(xy)
+        local = np.where(site >= 0, self._local[np.maximum(site, 0)], -1)
+        inverse_area = np.where(local >= 0, 1.0 / self._area[np.maximum(local, 0)], 0.0)
+        return local, inverse_area
+
+    def image(self, site_values, width: int, height: int) -> mi.TensorXf:
+        """The camera's image from per-channel site values (three ``mi.Float`` of ``sites``)."""
         flat = dr.zeros(mi.Float, self.pixels * 3)
         pixel = dr.arange(mi.UInt32, self.pixels)
-        for c, value in enumerate((radiance.x, radiance.y, radiance.z)):
-            site_mean = dr.block_sum(value, per) * inv
+        for c, site_mean in enumerate(site_values):
             idx, w, n = self.forward[c]
             total = mi.Float(0.0)
             for k in range(n):
@@ -144,7 +207,7 @@ class FootprintFilm:
 
     def adjoint(self, weight: mi.Float, site: mi.UInt32, spp: int) -> mi.Color3f:
         """Each lane's share of an image adjoint ``weight`` (flat, pixel-major RGB): ``P^T``."""
-        inv = opaque(mi.Float, 1.0 / self.site_spp(spp))
+        inv = self._inverse_count(site, spp)
         out = []
         for c in range(3):
             pix, w, n = self.transpose[c]
@@ -159,7 +222,7 @@ class FootprintFilm:
     def splats(self, site: mi.UInt32, spp: int):
         """For a recording: per channel and entry, the pixels each lane's light lands in and the
         weights relative to ``1 / spp`` (what :meth:`PathTracer.record` divides by)."""
-        scale = opaque(mi.Float, spp / self.site_spp(spp))
+        scale = self._inverse_count(site, spp) * opaque(mi.Float, spp)
         for c in range(3):
             pix, w, n = self.transpose[c]
             for k in range(n):
@@ -170,10 +233,12 @@ class FootprintFilm:
 _FILMS: WeakKeyDictionary = WeakKeyDictionary()
 
 
-def footprint_film(footprint: Footprint, block: int, width: int, height: int) -> FootprintFilm:
-    """The Dr.Jit tables of ``footprint`` for a camera of ``block`` and size (cached)."""
-    key = (block, width, height, mi.variant())
+def footprint_film(footprint: Footprint, block: int, width: int, height: int,
+                   boost=None) -> FootprintFilm:
+    """The Dr.Jit tables of ``footprint`` for a camera of ``block``, size and sample ``boost``
+    (a :class:`~abs.render.camera.SampleBoost` or ``None``), cached."""
+    key = (block, width, height, boost, mi.variant())
     films = _FILMS.setdefault(footprint, {})
     if key not in films:
-        films[key] = FootprintFilm(footprint, block, width, height)
+        films[key] = FootprintFilm(footprint, block, width, height, boost)
     return films[key]

@@ -77,7 +77,6 @@ from abs.render.bsdfs.dielectric import DielectricBSDF
 from abs.render.camera import Camera
 from abs.render.environment import Environment
 from abs.render.edges import MovingMesh, boundary_term
-from abs.render.footprint import footprint_film
 from abs.render.jit import opaque, seed32
 from abs.render.path_lengths import bin_light
 
@@ -359,10 +358,6 @@ class PathTracer:
         if moving and camera.block > 1:
             raise NotImplementedError("pose and placement gradients (edge sampling) need block == 1: "
                                       "fit them without --downsample")
-        if moving and camera.footprint is not None:
-            raise NotImplementedError("pose and placement gradients (edge sampling) integrate the "
-                                      "tent filter, not a capture's sensor footprint: fit them on a "
-                                      "capture without 'processing' (blur_px is used then)")
 
     @staticmethod
     def _split(scene: mi.Scene, dispersion: str) -> bool:
@@ -402,6 +397,11 @@ class PathTracer:
         # must reuse the compiled kernels.
         sampler.seed(opaque(mi.UInt32, seed32(seed)), n)
         lane = dr.arange(mi.UInt32, n)
+        if camera.footprint is not None:
+            film = camera.film()
+            site, u, v = film.positions(sampler, lane, spp)
+            origin, d = camera.rays(u, v)
+            return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), site, None, film
         pixel = lane // opaque(mi.UInt32, spp)
         width = opaque(mi.UInt32, w)
         share, boost = None, camera.boost
@@ -411,11 +411,6 @@ class PathTracer:
             j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, spp * (boost.factor - 1))
             pixel = dr.select(extra, _boosted_pixel(boost, j, width), pixel)
             share = dr.select(_in_boost(boost, pixel, width), opaque(mi.Float, 1.0 / boost.factor), 1.0)
-        if camera.footprint is not None:
-            film = footprint_film(camera.footprint, camera.block, w, h)
-            site, u, v = film.positions(sampler, lane, spp)
-            origin, d = camera.rays(u, v)
-            return sampler, mi.Ray3f(origin, d, float(_ALL_CHANNELS), mi.Color0f()), site, None, film
         px = mi.Float(pixel % width)
         py = mi.Float(pixel // width)
         offset = sampler.next_2d()
