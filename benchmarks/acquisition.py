@@ -484,10 +484,13 @@ E2E = {"width": 128, "height": 96, "views": 3, "truth_spp": 1024, "fit_spp": 32,
        "start_absorption": [2.5, 2.5, 2.5], "downsamples": [1, 2]}
 
 
-def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict, noise_seed: int = 3) -> Path:
+def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict, noise_seed: int = 3,
+                      render=None) -> Path:
     """``end_to_end``'s raw RGGB brackets (12-bit TIFFs, dark frame, camera file, build file)
     of ``views`` through the distorted cameras, in ``raw``; the same data on every call with the
-    same ``noise_seed`` (the sensor noise's; the renders' seeds are fixed). Returns the folder."""
+    same ``noise_seed`` (the sensor noise's; the renders' seeds are fixed). ``render(compiled,
+    camera, spp, seed) -> (H, W, 3)`` replaces abs's renderer for the scene renders (the glass
+    benchmark's plain Mitsuba). Returns the folder."""
     from abs.acquisition.camera_file import CameraModel, write_camera_file
     from abs.acquisition.demosaic import cfa_masks
     from abs.render import Camera
@@ -505,8 +508,9 @@ def _e2e_raw_brackets(compiled, views, raw: Path, cfg: dict, noise_seed: int = 3
         f_r, w_r, h_r = render_pinhole_size(K, dist, W, H, n)
         K_r = np.array([[f_r, 0, (w_r - 1) / 2], [0, f_r, (h_r - 1) / 2], [0, 0, 1]])
         cam = Camera(K_r, np.asarray(view["R"]), np.asarray(view["t"]), w_r, h_r)
-        pin = compiled.render(cam, spp=cfg["truth_spp"] // (n * n) or 1,
-                              seed=cfg.get("truth_seed", 500) + i).numpy()
+        spp, seed = cfg["truth_spp"] // (n * n) or 1, cfg.get("truth_seed", 500) + i
+        pin = (compiled.render(cam, spp=spp, seed=seed).numpy() if render is None
+               else render(compiled, cam, spp, seed))
         rgb = distort_render(pin, f_r, K, dist, W, H, n)
         L = np.sum(np.maximum(rgb, 0) * gain * masks, axis=-1)
         name = f"cam{i}"
@@ -638,6 +642,25 @@ def part_end_to_end_superpixel() -> dict:
     return out
 
 
+def _one_run(cfg: dict, runs) -> dict:
+    """Fits of ``runs`` (label, capture folder of :func:`_e2e_captures`, unit, downsample) on
+    one set of end-to-end captures (simulate seed 2, noise seed 3)."""
+    t0 = time.perf_counter()
+    scene_path, scene, compiled, views, truth = _e2e_setup()
+    out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        out["blur_px"] = _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=2,
+                                       noise_seed=3)
+        for label, folder, unit, ds in runs:
+            out[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
+            print(label, np.round(out[label]["glass_absorption_error"], 2),
+                  np.round(out[label]["glass_absorption_stderr"], 2),
+                  round(out[label]["seconds"]), flush=True)
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
 def part_end_to_end_blur() -> dict:
     """``end_to_end`` with the capture's processing blur modelled (``blur_px`` in
     ``cameras.json``, written by ``build_capture`` since it measures its demosaicing and
@@ -648,27 +671,16 @@ def part_end_to_end_blur() -> dict:
     and start as ``end_to_end``, fitted at 128 samples per pixel instead of 32: today's fits of
     absorption and scale reweight one path-length recording per view instead of rendering at
     every step (issue 31), so the fit's samples are the recording's, and at 32 the simulated
-    capture's green absorption is not measured (the fit says so: standard error 1e4)."""
-    t0 = time.perf_counter()
-    cfg = {**E2E, "fit_spp": 128}
-    scene_path, scene, compiled, views, truth = _e2e_setup()
-    gain = cfg["gain_dn_per_s"]
-    out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        out["blur_px"] = _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=2,
-                                       noise_seed=3)
-        print("blur_px", out["blur_px"], flush=True)
-        runs = (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
-                ("built_from_raw", "bilinear", gain, 1),
-                ("built_from_raw_downsample2", "bilinear", gain, 2),
-                ("built_from_raw_unblurred", "unblurred", gain, 1),
-                ("built_from_raw_superpixel", "superpixel", gain, 1))
-        for label, folder, unit, ds in runs:
-            out[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
-            print(label, np.round(out[label]["glass_absorption_error"], 2), flush=True)
-    out["seconds"] = time.perf_counter() - t0
-    return out
+    capture's green absorption is not measured (the fit says so: standard error 1e4).
+    Measured before builds wrote ``processing``: rerunning it now fits the bilinear and
+    superpixel builds through their footprints (``end_to_end_footprint``)."""
+    gain = E2E["gain_dn_per_s"]
+    return _one_run({**E2E, "fit_spp": 128},
+                    (("simulate", "simulated", 1.0, 1), ("simulate_downsample2", "simulated", 1.0, 2),
+                     ("built_from_raw", "bilinear", gain, 1),
+                     ("built_from_raw_downsample2", "bilinear", gain, 2),
+                     ("built_from_raw_unblurred", "unblurred", gain, 1),
+                     ("built_from_raw_superpixel", "superpixel", gain, 1)))
 
 
 def part_end_to_end_footprint() -> dict:
@@ -678,26 +690,12 @@ def part_end_to_end_footprint() -> dict:
     simulated capture, the bilinear build (footprint) at downsample 1 and 2, the same build
     fitted through ``blur_px``'s Gaussian instead (``processing`` removed), and the superpixel
     build (footprint). Raw brackets with noise seed 3, 128 samples per pixel, the same start."""
-    t0 = time.perf_counter()
-    cfg = {**E2E, "fit_spp": 128}
-    scene_path, scene, compiled, views, truth = _e2e_setup()
-    gain = cfg["gain_dn_per_s"]
-    out: dict = {"config": {k: v for k, v in cfg.items()}, "truth": truth}
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        _e2e_captures(tmp, scene, compiled, views, cfg, simulate_seed=2, noise_seed=3)
-        runs = (("simulate", "simulated", 1.0, 1),
-                ("built_from_raw", "bilinear", gain, 1),
-                ("built_from_raw_gaussian", "gaussian", gain, 1),
-                ("built_from_raw_downsample2", "bilinear", gain, 2),
-                ("built_from_raw_superpixel", "superpixel", gain, 1))
-        for label, folder, unit, ds in runs:
-            out[label] = _e2e_fit(scene_path, tmp / folder, unit, ds, truth, cfg)
-            print(label, np.round(out[label]["glass_absorption_error"], 2),
-                  np.round(out[label]["glass_absorption_stderr"], 2),
-                  round(out[label]["seconds"]), flush=True)
-    out["seconds"] = time.perf_counter() - t0
-    return out
+    gain = E2E["gain_dn_per_s"]
+    return _one_run({**E2E, "fit_spp": 128},
+                    (("simulate", "simulated", 1.0, 1), ("built_from_raw", "bilinear", gain, 1),
+                     ("built_from_raw_gaussian", "gaussian", gain, 1),
+                     ("built_from_raw_downsample2", "bilinear", gain, 2),
+                     ("built_from_raw_superpixel", "superpixel", gain, 1)))
 
 
 def part_end_to_end_footprint_replicates() -> dict:
@@ -714,7 +712,8 @@ def part_end_to_end_blur_render_seeds() -> dict:
     """``end_to_end_blur``'s bilinear build (blur modelled) and its simulated reference with other
     seeds for the scene renders behind the raw brackets (``end_to_end`` uses 500 + view; every
     other part shares those renders): how much of the built capture's remaining error is that
-    one render's Monte-Carlo error. Sensor-noise seed 3, simulate seed 2, 128 spp fits."""
+    one render's Monte-Carlo error. Sensor-noise seed 3, simulate seed 2, 128 spp fits.
+    Measured before builds wrote ``processing`` (rerunning it now fits the footprint)."""
     t0 = time.perf_counter()
     out: dict = {"config": "as end_to_end_blur; truth render seeds 700, 900 (+ view)"}
     for truth_seed in (700, 900):
@@ -753,7 +752,8 @@ def part_end_to_end_replicates() -> dict:
 def part_end_to_end_blur_replicates() -> dict:
     """``end_to_end_blur``'s comparison (128 samples per pixel) repeated with the replicate
     seeds: the simulated capture, the bilinear build with its ``blur_px`` and without it, and
-    the superpixel build, all at downsample 1."""
+    the superpixel build, all at downsample 1. Measured before builds wrote ``processing``
+    (rerunning it now fits the builds through their footprints)."""
     gain = E2E["gain_dn_per_s"]
     return _replicates({**E2E, "fit_spp": 128},
                        (("simulate", "simulated", 1.0, 1), ("built_from_raw", "bilinear", gain, 1),

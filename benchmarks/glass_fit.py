@@ -11,6 +11,12 @@ short fits from several IORs choose the start, then ``SETTINGS``, IOR tied; the 
 ``abs.fit``'s own, ``FitSettings.starts``), unless ``--settings`` replaces the settings (then from
 the scene file's values) or ``--single-start`` skips the starts.
 
+A case with ``sensor`` is photographed instead through a simulated camera (barrel distortion, an
+RGGB Bayer sensor, raw brackets with shot and read noise; the plain-Mitsuba renders at twice the
+resolution behind it) and built into its capture by ``build_capture``, as a user's raw
+photographs are; the fit then renders the build's processing exactly (``processing`` in
+``cameras.json``). Its scale is reported in scene units (the sensor's gain divided out).
+
 Reported per case: fitted values and standard errors against the truth, whether each truth lies
 within two standard errors, holdout RMSE before/after, the fit's own checks, renders and time.
 
@@ -49,6 +55,10 @@ class Case:
     start_ior: float = 1.5  # the scene file's (the fit's start without the recipe's several starts)
     elevation_deg: float = 20.0  # the cameras' (abs.simulate.place_cameras)
     object_fraction: float = 0.5  # of the vertical field of view the object's bounding sphere spans
+    # Photographed by a simulated camera instead: barrel distortion, an RGGB Bayer sensor, 12-bit
+    # raw brackets with shot and read noise, built into the capture by `abs capture build`
+    # (bilinear demosaicing, undistortion; benchmarks/acquisition.py's end-to-end sensor).
+    sensor: bool = False
 
 
 CASES = [
@@ -62,7 +72,40 @@ CASES = [
          object_fraction=0.9),
     # A start in the wrong basin: one fit from 1.75 ended at 1.646 +- 0.007 with no check.
     Case("sphere-1.47-from-1.75", "sphere.ply", 1.47, (0.0, 0.0, 0.0), 1.0, start_ior=1.75),
+    # The issue's sphere photographed through a raw sensor and built as a user's photographs are.
+    Case("sphere-1.52-raw", "sphere.ply", 1.523, (6.0, 2.5, 1.0), 1.6, sensor=True),
 ]
+
+#: The sensor of ``Case.sensor`` cases: data numbers per second per unit of scene radiance. The
+#: built capture's values, and so the fitted ``environment.scale``, carry this factor.
+SENSOR_GAIN = 2.0e5
+
+
+def _raw_capture(case: Case, folder: Path, args) -> None:
+    """The case's capture photographed by a simulated camera (``Case.sensor``): plain Mitsuba
+    renders at twice the resolution resampled through barrel distortion, mosaiced, exposed as
+    12-bit raw brackets, then built by ``build_capture``."""
+    import shutil
+
+    from abs.acquisition.build import build_capture
+    from abs.render import compile_scene
+    from abs.scene import load_scene
+    from abs.simulate import place_cameras
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from acquisition import E2E, _e2e_raw_brackets
+
+    compiled = compile_scene(load_scene(folder / "truth.toml"))
+    views = place_cameras(compiled, args.views, args.width, args.height,
+                          elevation_deg=case.elevation_deg, object_fraction=case.object_fraction)
+    cfg = {**E2E, "width": args.width, "height": args.height, "views": args.views,
+           "truth_spp": args.photo_spp, "gain_dn_per_s": SENSOR_GAIN, "truth_seed": 1}
+    for sub in ("raw", "capture"):
+        shutil.rmtree(folder / sub, ignore_errors=True)
+    raw = _e2e_raw_brackets(compiled, views, folder / "raw", cfg, noise_seed=1,
+                            render=mitsuba_photograph)
+    build_capture(raw / "build.json", folder / "capture")
+
 
 
 def _scene_text(mesh: str, ior, absorption, scale: float) -> str:
@@ -121,14 +164,22 @@ def run_case(case: Case, work: Path, args) -> dict:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "truth.toml").write_text(_scene_text(case.mesh, [case.ior] * 3, case.absorption_per_m,
                                                    case.env_scale))
+    # A built capture's values are data numbers per second: the start (and truth) of the scale
+    # carry the sensor's gain, the start still 1 in scene units.
+    unit = SENSOR_GAIN if case.sensor else 1.0
     (folder / "scene.toml").write_text(_scene_text(case.mesh, [case.start_ior] * 3, (1.0, 1.0, 1.0),
-                                                   1.0))
+                                                   unit))
     # The mesh's bytes key the cached capture too: an edited asset (the bowl lifted off the cloth)
     # renders a new one.
     shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp,
-             "mesh_sha256": hashlib.sha256((DEFAULT / case.mesh).read_bytes()).hexdigest()}
+             "mesh_sha256": hashlib.sha256((DEFAULT / case.mesh).read_bytes()).hexdigest(),
+             **({"sensor_gain": SENSOR_GAIN} if case.sensor else {})}
     made = folder / "capture" / "benchmark.json"
-    if not made.exists() or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}:
+    if case.sensor and (not made.exists()
+                        or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}):
+        _raw_capture(case, folder, args)
+        made.write_text(json.dumps({**shape, "truth": _truth(case)}))
+    elif not made.exists() or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}:
         simulate_capture(load_scene(folder / "truth.toml"), folder / "capture", n_cameras=args.views,
                          width=args.width, height=args.height, spp=args.photo_spp, shot_noise=1e-4,
                          read_noise=0.003, seed=1, render=mitsuba_photograph,
@@ -145,7 +196,7 @@ def run_case(case: Case, work: Path, args) -> dict:
 
     result = fit(folder / "scene.toml", folder / "capture", FITTED, settings, on_iteration=progress,
                  truth={"glass.absorption": list(case.absorption_per_m), "glass.ior": [case.ior] * 3,
-                        "environment.scale": [case.env_scale]})
+                        "environment.scale": [case.env_scale * unit]})
     summary = result.summary()
     rows = {}
     for name in FITTED:
@@ -153,13 +204,15 @@ def run_case(case: Case, work: Path, args) -> dict:
         value, stderr, truth = (np.array(entry[k], float) if entry[k] is not None else None
                                 for k in ("value", "stderr", "truth"))
         stderr = np.array([np.nan if s is None else s for s in entry["stderr"]], float)
+        if name == "environment.scale":  # in scene units
+            value, stderr, truth = value / unit, stderr / unit, truth / unit
         rows[name] = {"value": value.tolist(), "stderr": [None if not np.isfinite(s) else s for s in stderr],
                       "truth": truth.tolist(), "error": (value - truth).tolist(),
                       "covered_2se": [bool(abs(v - t) <= 2 * s) if np.isfinite(s) else False
                                       for v, t, s in zip(value, truth, stderr)],
                       # The refinement's steps cut to the trust radius (the noise-walk check's).
                       "refinement_limited": entry.get("refinement_limited")}
-    return {"case": case.name, "mesh": case.mesh, "parameters": rows, "checks": summary["checks"],
+    return {"case": case.name, "mesh": case.mesh, "sensor": case.sensor, "parameters": rows, "checks": summary["checks"],
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
             "starts": summary.get("starts"), "difference_steps": summary.get("difference_steps"),

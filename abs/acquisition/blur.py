@@ -39,8 +39,8 @@ from __future__ import annotations
 import numpy as np
 
 from abs.acquisition.camera_file import CameraModel
-from abs.acquisition.demosaic import SUPERPIXEL_FROM_FULL, demosaic
-from abs.acquisition.undistort import remap_bilinear, superpixel_camera, undistortion_maps
+from abs.acquisition.demosaic import demosaic
+from abs.acquisition.undistort import remap_bilinear, sensor_sampling, superpixel_camera
 
 __all__ = ["PIXEL_FOOTPRINT_VARIANCE_PX2", "processing_blur"]
 
@@ -105,12 +105,8 @@ def processing_blur(camera: CameraModel, K_new: np.ndarray, method: str | None =
     h, w = camera.height, camera.width
     superpixel = method == "superpixel"
     built = superpixel_camera(camera) if superpixel else camera
-    map_x, map_y = undistortion_maps(built, K_new)
     # Where each built pixel samples, in sensor pixels.
-    source_x, source_y = map_x.astype(np.float64), map_y.astype(np.float64)
-    if superpixel:
-        full = np.linalg.inv(SUPERPIXEL_FROM_FULL)
-        source_x, source_y = full[0, 0] * source_x + full[0, 2], full[1, 1] * source_y + full[1, 2]
+    map_x, map_y, source_x, source_y = sensor_sampling(camera, K_new, superpixel)
     scale = 2 if superpixel else 1  # sensor pixels per pixel of the demosaiced image
     variances = []
     for y0, y1, x0, x1 in _tiles(h, w, whole_frame_px):

@@ -42,8 +42,8 @@ import numpy as np
 from scipy import sparse
 
 from abs.acquisition.camera_file import CameraModel
-from abs.acquisition.demosaic import SUPERPIXEL_FROM_FULL, demosaic
-from abs.acquisition.undistort import remap_bilinear, superpixel_camera, undistortion_maps
+from abs.acquisition.demosaic import demosaic
+from abs.acquisition.undistort import remap_bilinear, sensor_sampling
 from abs.io.capture import SensorProcessing
 
 __all__ = ["MAX_SENSOR_PIXELS", "Footprint", "processing_footprint"]
@@ -120,13 +120,7 @@ def _pipeline(processing: SensorProcessing, K_new: np.ndarray):
     pixel samples the sensor (full-resolution sensor pixels)."""
     camera = _sensor_camera(processing)
     method = processing.demosaic
-    superpixel = method == "superpixel"
-    built = superpixel_camera(camera) if superpixel else camera
-    map_x, map_y = undistortion_maps(built, K_new)
-    source_x, source_y = map_x.astype(np.float64), map_y.astype(np.float64)
-    if superpixel:
-        full = np.linalg.inv(SUPERPIXEL_FROM_FULL)
-        source_x, source_y = full[0, 0] * source_x + full[0, 2], full[1, 1] * source_y + full[1, 2]
+    map_x, map_y, source_x, source_y = sensor_sampling(camera, K_new, method == "superpixel")
 
     def through(raw: np.ndarray) -> np.ndarray:
         # In float32 as the build computes (abs.acquisition.build): OpenCV resamples float32

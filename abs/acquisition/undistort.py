@@ -15,11 +15,11 @@ import cv2
 import numpy as np
 
 from abs.acquisition.camera_file import CameraModel
-from abs.acquisition.demosaic import superpixel_K
+from abs.acquisition.demosaic import SUPERPIXEL_FROM_FULL, superpixel_K
 from abs.errors import InputError
 
-__all__ = ["pinhole_K", "remap_bilinear", "superpixel_camera", "undistort_image",
-           "undistort_mask", "undistortion_maps"]
+__all__ = ["pinhole_K", "remap_bilinear", "sensor_sampling", "superpixel_camera",
+           "undistort_image", "undistort_mask", "undistortion_maps"]
 
 
 def superpixel_camera(camera: CameraModel) -> CameraModel:
@@ -56,6 +56,22 @@ def undistortion_maps(camera: CameraModel, K_new: np.ndarray) -> tuple[np.ndarra
     ``(x, y)`` in the distorted image that it samples: two ``(H, W)`` float32 arrays, pixels."""
     return cv2.initUndistortRectifyMap(camera.K, camera.distortion, None, K_new,
                                        (camera.width, camera.height), cv2.CV_32FC1)
+
+
+def sensor_sampling(camera: CameraModel, K_new: np.ndarray, superpixel: bool = False):
+    """The undistortion maps of a build and where each built pixel samples the sensor.
+
+    Returns ``(map_x, map_y, source_x, source_y)``: the maps into the demosaiced image (float32,
+    its pixels; half resolution for superpixels, ``camera`` being the full-resolution sensor's)
+    and the same positions in full-resolution sensor pixels (float64).
+    """
+    built = superpixel_camera(camera) if superpixel else camera
+    map_x, map_y = undistortion_maps(built, K_new)
+    source_x, source_y = map_x.astype(np.float64), map_y.astype(np.float64)
+    if superpixel:
+        full = np.linalg.inv(SUPERPIXEL_FROM_FULL)
+        source_x, source_y = full[0, 0] * source_x + full[0, 2], full[1, 1] * source_y + full[1, 2]
+    return map_x, map_y, source_x, source_y
 
 
 def remap_bilinear(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarray,
