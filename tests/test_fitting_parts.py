@@ -648,3 +648,42 @@ def test_monte_carlo_error_of_a_walk_covers_its_mean():
     independent = rng.normal(size=(12, 1))
     assert (with_monte_carlo_error(base, independent, sequential=True).stderr[0]
             <= with_monte_carlo_error(base, independent).stderr[0] * 1.6)
+
+
+def test_laplace_does_not_depend_on_a_parameters_units():
+    """A scalar in units 1e6 times smaller (an environment scale fitted in data numbers per
+    second) is as identifiable as before, its standard error 1e6 times larger."""
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(400, 3))
+    r = rng.normal(0, 0.1, 400)
+    base = laplace(r, J)
+    units = np.array([1.0, 1.0, 1e-6])  # d r / d (scaled scalar)
+    scaled = laplace(r, J * units)
+    assert scaled.identifiable.all()
+    np.testing.assert_allclose(scaled.stderr, base.stderr / units, rtol=1e-6)
+    # A direction the photographs really do not see is still refused.
+    J2 = J.copy()
+    J2[:, 2] = J2[:, 1]
+    assert not laplace(r, J2).identifiable[1:].any()
+
+
+def test_laplace_sandwich_covers_correlated_noise():
+    """Least squares on pixels whose noise is spread between neighbours (a moving average, as
+    demosaicing spreads a site's noise): the plain Laplace covariance is too small, the sandwich
+    with the noise's correlation matches the estimates' spread over noise draws."""
+    rng = np.random.default_rng(7)
+    M = 600
+    J = np.column_stack([np.ones(M), np.sin(np.arange(M) / 40.0)])
+    A = sum(np.eye(M, k=k) for k in (-2, -1, 0, 1, 2)) / np.sqrt(5)  # unit-variance moving average
+    K = A @ A.T
+    estimates, last = [], None
+    for _ in range(400):
+        noise = A @ rng.normal(0, 0.1, M)
+        theta, *_ = np.linalg.lstsq(J, noise, rcond=None)
+        estimates.append(theta)
+        last = noise - J @ theta
+    spread = np.std(estimates, axis=0)
+    plain = laplace(last, J).stderr
+    sandwich = laplace(last, J, jacobian2=J, correlation=lambda X: K @ X).stderr
+    assert np.all(plain < 0.6 * spread)
+    np.testing.assert_allclose(sandwich, spread, rtol=0.15)

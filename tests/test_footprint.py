@@ -251,3 +251,36 @@ def test_pose_gradient_under_a_footprint(silhouette_scene_dir):
         res = directional_gradient(compiled, camera, "sphere.pose", direction, 0.003, weights,
                                    max_depth=1, spp=128, seeds=4)
         assert_gradients_agree(*res, rel=0.1)
+
+
+def test_noise_of_a_built_photograph_is_estimated_at_its_level():
+    """Demosaicing spreads a site's noise into its neighbours, which the white-noise estimator
+    largely cancels; with the camera's footprint the estimate is the per-pixel level again."""
+    from abs.model.noise import estimate_image_noise
+
+    cam = _camera(96, 72)
+    K_new = pinhole_K(cam)
+    fp = processing_footprint(SensorProcessing(96, 72, cam.K, DIST, "bilinear", "RGGB"), K_new, 96, 72)
+    camera = Camera(K_new, np.eye(3), np.zeros(3), 96, 72, footprint=fp)
+    rng = np.random.default_rng(5)
+    flat = np.full((72, 96), 0.5)
+    built = [undistort_image(demosaic(flat + rng.normal(0, 0.01, flat.shape), "RGGB", "bilinear",
+                                      np.float64), cam, K_new) for _ in range(2)]
+    inner = (slice(4, -4), slice(4, -4))
+    true = float(np.std((built[0] - built[1])[inner]) / np.sqrt(2))
+    assert estimate_image_noise(built[0][inner]) < 0.75 * true  # the white-noise reading
+    assert estimate_image_noise(built[0], camera) == pytest.approx(true, rel=0.12)
+
+
+def test_noise_correlation_is_the_build_weights_outer_product():
+    cam = _camera(20, 16)
+    K_new = pinhole_K(cam)
+    fp = processing_footprint(SensorProcessing(20, 16, cam.K, DIST, "bilinear", "RGGB"), K_new, 20, 16)
+    film = Camera(K_new, np.eye(3), np.zeros(3), 20, 16, footprint=fp).film()
+    X = np.random.default_rng(2).normal(size=(20 * 16, 3, 2))
+    for c in range(3):
+        P = fp.weights[c].toarray()
+        expected = P @ P.T @ X[:, c] / film.white_noise_std() ** 2
+        np.testing.assert_allclose(film.correlate(X)[:, c], expected, rtol=1e-4, atol=1e-5)
+    diag = np.concatenate([np.sum(fp.weights[c].toarray() ** 2, 1) for c in range(3)])
+    assert np.mean(diag) / film.white_noise_std() ** 2 == pytest.approx(1.0, rel=1e-6)

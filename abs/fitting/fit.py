@@ -231,10 +231,11 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
 
     # Pixel noise (photograph + Monte-Carlo) weighs the pixels against the priors.
     first = model.problem("train", settings.downsample, settings.clamp)
+    obs = first.observations[0]
     sigma = float(np.hypot(
-        estimate_image_noise(first.observations[0].photograph),
-        estimate_image_noise(first.render(first.observations[0], vector.initial, settings.spp,
-                                          settings.seed + 3))))
+        estimate_image_noise(obs.photograph, obs.camera),
+        estimate_image_noise(first.render(obs, vector.initial, settings.spp, settings.seed + 3),
+                             obs.camera)))
     sigma = max(sigma, 1e-4)
     objective = Objective.build(model, settings, sigma, priors)
     has_prior, prior_sd = objective.has_prior, objective.prior_sd
@@ -271,7 +272,9 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     # The refinement's own Jacobian pairs near the optimum average into the curvature: an IOR's
     # column through glass is noisy, and one pair's cross curvature can leave it unresolved.
     nearby = _refinement_curvatures(optimiser.curvatures(state), objective)
-    uncertainty = laplace(r, J, prior, jacobian2=J2, curvatures=nearby, residuals2=r2)
+    correlation = problem.noise_correlation()
+    uncertainty = laplace(r, J, prior, jacobian2=J2, curvatures=nearby, residuals2=r2,
+                          correlation=correlation)
     # A curvature still unresolved may be resolved by more pairs at the optimum: up to three
     # more before saying so.
     more = []
@@ -279,7 +282,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         seed = settings.seed + 90 - 2 * len(more)
         more.append((problem.jacobian(theta, settings.spp, seed), problem.jacobian(theta, settings.spp, seed - 1)))
         uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more, curvatures=nearby,
-                              residuals2=r2)
+                              residuals2=r2, correlation=correlation)
     monte_carlo_points = 0
     if points is not None:
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
@@ -295,8 +298,9 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     # The noise a perfect model would leave: the photographs' and the renderings' own, on the
     # views the checks judge (holdout views when there are any).
     judged = [o for o in full.observations if o.holdout] or full.observations
-    image_noise = float(np.mean([np.hypot(estimate_image_noise(o.photograph),
-                                          estimate_image_noise(after[o.name])) for o in judged]))
+    image_noise = float(np.mean([np.hypot(estimate_image_noise(o.photograph, o.camera),
+                                          estimate_image_noise(after[o.name], o.camera))
+                                 for o in judged]))
     views = [ViewRenderings(o.name, o.holdout, o.photograph, before[o.name], after[o.name], o.mask)
              for o in full.observations]
     history = [{**h, "values": {k: v.tolist() for k, v in vector.split(vector.to_physical(h["z"])).items()}}

@@ -123,7 +123,8 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
             jacobian2: np.ndarray | None = None,
             more_pairs: Sequence[tuple[np.ndarray, np.ndarray]] = (),
             curvatures: Sequence[np.ndarray] = (),
-            residuals2: np.ndarray | None = None) -> LaplaceApproximation:
+            residuals2: np.ndarray | None = None,
+            correlation=None) -> LaplaceApproximation:
     """Laplace approximation from residuals (M,) and their Jacobian (M, P) at the optimum.
 
     Parameters
@@ -151,6 +152,12 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
         (:func:`with_monte_carlo_error`): the renders' noise would otherwise be counted twice
         (sphere-1.52 of the glass suite at 64 spp: absorption standard errors three times as
         wide).
+    correlation : callable, optional
+        ``K @ X`` for (M, n) matrices, ``K`` the correlation of the pixel noise between residuals
+        (:meth:`abs.model.FitProblem.noise_correlation`; mean diagonal 1). The least-squares
+        estimate's covariance is then the sandwich ``H^-1 (J^T K J / sigma^2) H^-1`` instead of
+        ``H^-1``: a built photograph's demosaicing spreads each site's noise over neighbouring
+        pixels, which then carry less independent information than their number says.
     """
     m, p = jacobian.shape
     other = residuals if residuals2 is None else residuals2
@@ -167,10 +174,24 @@ def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | 
     if prior_sd is not None:
         precision = precision + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))
     # Eigen-decomposition: directions with (numerically) zero curvature are not identifiable.
-    w, V = np.linalg.eigh(precision)
+    # Of the precision scaled to unit diagonal, so that a scalar's units do not decide it (an
+    # environment scale in data numbers per second, ~1e5, against an IOR: their curvatures
+    # differ by 1e10 and the scale came out "singular").
+    d = np.sqrt(np.maximum(np.diag(precision), 0.0))
+    d = np.where(d > 0, d, 1.0)
+    w, V = np.linalg.eigh(precision / np.outer(d, d))
     floor = max(float(w.max()), 1e-300) * 1e-10
     good = w > floor
-    inv = (V[:, good] / w[good]) @ V[:, good].T
+    inv = ((V[:, good] / w[good]) @ V[:, good].T) / np.outer(d, d)
+    if correlation is not None:
+        # The "meat" from independent Jacobians, as the curvature (J1^T K J2 is not inflated by
+        # their Monte-Carlo noise).
+        pairs = [(jacobian, jacobian2 if jacobian2 is not None else jacobian), *more_pairs]
+        meat = np.mean([0.5 * (a.T @ correlation(b) + (a.T @ correlation(b)).T) for a, b in pairs],
+                       axis=0) / max(sigma2, 1e-300)
+        if prior_sd is not None:
+            meat = meat + np.diag(1.0 / np.square(np.asarray(prior_sd, np.float64)))
+        inv = inv @ meat @ inv
     # A scalar is unidentifiable when a tenth or more of it lies in unresolved directions; a
     # small share (a scale's 1 % in an IOR's unresolved direction) leaves it resolved, its
     # standard error from the resolved directions.

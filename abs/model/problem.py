@@ -179,6 +179,31 @@ class FitProblem:
         return image.astype(np.float64)
 
     # ---------------------------------------------------------- residuals
+    def noise_correlation(self):
+        """``K @ X`` for matrices ``X`` (M, n) over the residuals' rows, ``K`` the correlation of
+        the pixel noise between residuals: views whose cameras render a built capture's
+        processing (a footprint) have noise spread between neighbouring pixels by demosaicing
+        and resampling (:meth:`abs.render.footprint.FootprintFilm.correlate`), other views
+        independent noise (``K = I``). ``None`` when no view has a footprint."""
+        if all(o.camera.footprint is None for o in self.observations):
+            return None
+
+        def apply(X: np.ndarray) -> np.ndarray:
+            X = np.asarray(X, np.float64)
+            out, offset = np.empty_like(X), 0
+            for obs in self.observations:
+                n = 3 * obs.pixels
+                block = X[offset:offset + n]
+                if obs.camera.footprint is not None:
+                    full = np.zeros((obs.mask.size, 3, X.shape[1]))
+                    full[obs.mask.ravel()] = block.reshape(-1, 3, X.shape[1])
+                    block = obs.camera.film().correlate(full)[obs.mask.ravel()].reshape(n, -1)
+                out[offset:offset + n] = block
+                offset += n
+            return out
+
+        return apply
+
     def _clamp(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The image as compared, and where it carries derivatives (not clamped)."""
         if self.clamp is None:

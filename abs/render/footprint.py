@@ -106,6 +106,8 @@ class FootprintFilm:
             shift = (block - 1) / 2.0
             c, j = (c - shift) / block, j / block
         self._footprint = footprint
+        self._forward_numpy = t.forward
+        self._size = (height, width)
         self._local = np.full(footprint.site_center.shape[0], -1, np.int64)
         self._local[t.sites] = np.arange(self.sites)
         self._area = np.abs(np.linalg.det(j))  # a site's square in the camera's pixels^2
@@ -128,6 +130,33 @@ class FootprintFilm:
         factor[boosted] = self.factor
         self.boosted_sites = from_numpy(mi.UInt32, boosted if len(boosted) else np.zeros(1), np.uint32)
         self.site_factor = from_numpy(mi.Float, factor)
+
+    def apply_numpy(self, site_values: np.ndarray) -> np.ndarray:
+        """The camera's ``(height, width, 3)`` image of per-channel site values ``(sites, 3)``
+        (NumPy, float64): the build's weights, as :meth:`image` applies them in Dr.Jit."""
+        values = np.asarray(site_values, np.float64)
+        return np.stack([np.sum(w * values[idx, c], axis=1)
+                         for c, (idx, w) in enumerate(self._forward_numpy)], -1).reshape(*self._size, 3)
+
+    def correlate(self, X: np.ndarray) -> np.ndarray:
+        """``K X`` for ``X`` of shape ``(pixels, 3, n)`` (the camera's pixels row-major, per
+        channel): ``K = P P^T / k``, the correlation between pixels that independent noise of one
+        level on every site takes through the build's weights, ``k`` making its mean diagonal 1
+        (:meth:`white_noise_std` squared)."""
+        X = np.asarray(X, np.float64)
+        out = np.zeros_like(X)
+        k = self.white_noise_std() ** 2
+        for c, (idx, w) in enumerate(self._forward_numpy):
+            sites = np.zeros((self.sites, X.shape[2]))
+            np.add.at(sites, idx.ravel(), (w[..., None] * X[:, c, None, :]).reshape(-1, X.shape[2]))
+            out[:, c] = np.einsum("pn,pnk->pk", w, sites[idx]) / k
+        return out
+
+    def white_noise_std(self) -> float:
+        """The per-pixel standard deviation (RMS over pixels and channels) that independent unit
+        noise on every site leaves in the camera's image."""
+        return float(np.sqrt(np.mean([np.mean(np.sum(np.square(w), axis=1))
+                                      for _, w in self._forward_numpy])))
 
     def site_spp(self, spp: int) -> int:
         """Samples per (unboosted) site for ``spp`` samples per pixel: the same samples in all."""

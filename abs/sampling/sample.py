@@ -307,7 +307,7 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
     for k, obs in enumerate(problem.observations):
         renders.append(render_variance([problem.render(obs, theta, spp, seed + 2 + n_renders * k + i)
                                         for i in range(n_renders)]))
-        immerkaer.append(estimate_image_noise(obs.photograph))
+        immerkaer.append(estimate_image_noise(obs.photograph, obs.camera))
         n = 3 * obs.pixels
         half_render = renders[-1][obs.mask].ravel() / 2
         excess = np.square(r_bar[offset:offset + n]) - half_render
