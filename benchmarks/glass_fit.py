@@ -59,6 +59,9 @@ class Case:
     # raw brackets with shot and read noise, built into the capture by `abs capture build`
     # (bilinear demosaicing, undistortion; benchmarks/acquisition.py's end-to-end sensor).
     sensor: bool = False
+    # ... and the build told the simulated camera's point-spread function (``lens_blur_px`` in the
+    # build file, then the capture's ``processing``), as a user who measured the lens's would.
+    psf_known: bool = False
 
 
 CASES = [
@@ -74,11 +77,19 @@ CASES = [
     Case("sphere-1.47-from-1.75", "sphere.ply", 1.47, (0.0, 0.0, 0.0), 1.0, start_ior=1.75),
     # The sphere photographed through a raw sensor and built as a user's photographs are.
     Case("sphere-1.52-raw", "sphere.ply", 1.523, (6.0, 2.5, 1.0), 1.6, sensor=True),
+    Case("sphere-1.52-raw-psf", "sphere.ply", 1.523, (6.0, 2.5, 1.0), 1.6, sensor=True,
+         psf_known=True),
 ]
 
 #: The sensor of ``Case.sensor`` cases: data numbers per second per unit of scene radiance. The
 #: built capture's values, and so the fitted ``environment.scale``, carry this factor.
 SENSOR_GAIN = 2.0e5
+#: The simulated camera's blur beyond a site's square, sensor pixels: a site's value is made from
+#: a render at twice the resolution (Mitsuba's tent filter, variance 1/6 of a fine pixel^2 =
+#: 1/24 of a site's), resampled bilinearly at the distorted positions (on average 1/24 more) and
+#: averaged over 2 x 2 fine samples (1/16 where the square's box has 1/12): 1/16 in all beyond
+#: the box, a Gaussian of standard deviation 1/4.
+SIMULATED_LENS_BLUR_PX = 0.25
 
 
 def _raw_capture(case: Case, folder: Path, args) -> None:
@@ -104,6 +115,10 @@ def _raw_capture(case: Case, folder: Path, args) -> None:
         shutil.rmtree(folder / sub, ignore_errors=True)
     raw = _e2e_raw_brackets(compiled, views, folder / "raw", cfg, noise_seed=1,
                             render=mitsuba_photograph)
+    if case.psf_known:
+        # As a user with a measured point-spread function writes it into the build file.
+        build = json.loads((raw / "build.json").read_text())
+        (raw / "build.json").write_text(json.dumps({**build, "lens_blur_px": SIMULATED_LENS_BLUR_PX}))
     build_capture(raw / "build.json", folder / "capture")
 
 
@@ -173,7 +188,8 @@ def run_case(case: Case, work: Path, args) -> dict:
     # renders a new one.
     shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp,
              "mesh_sha256": hashlib.sha256((DEFAULT / case.mesh).read_bytes()).hexdigest(),
-             **({"sensor_gain": SENSOR_GAIN} if case.sensor else {})}
+             **({"sensor_gain": SENSOR_GAIN} if case.sensor else {}),
+             **({"lens_blur_px": SIMULATED_LENS_BLUR_PX} if case.psf_known else {})}
     made = folder / "capture" / "benchmark.json"
     if case.sensor and (not made.exists()
                         or json.loads(made.read_text()) != {**shape, "truth": _truth(case)}):

@@ -71,6 +71,23 @@ def test_build_writes_a_loadable_capture(tmp_path: Path):
     # The image written is the undistorted merge: constant red stays constant inside.
     red = view.read_image()[10:-10, 10:-10, 0]
     np.testing.assert_allclose(red, 2e4, rtol=2e-3)
+    # How each photograph was made, for fits to render exactly (abs.acquisition.footprint).
+    processing = view.processing
+    assert (processing.width, processing.height, processing.demosaic, processing.cfa_pattern,
+            processing.lens_blur_px) == (64, 48, "bilinear", "RGGB", 0.0)
+    np.testing.assert_allclose(processing.K, K)
+    np.testing.assert_allclose(processing.distortion, DIST)
+
+
+def test_build_records_a_given_lens_blur(tmp_path: Path):
+    build_file, _ = _setup(tmp_path)
+    spec = json.loads(build_file.read_text())
+    build_file.write_text(json.dumps({**spec, "lens_blur_px": 0.4}))
+    capture, _ = build_capture(build_file, tmp_path / "capture")
+    assert {v.processing.lens_blur_px for v in capture.views} == {0.4}
+    build_file.write_text(json.dumps({**spec, "lens_blur_px": "0.4"}))
+    with pytest.raises(InputError, match=r"build.json: lens_blur_px"):
+        build_capture(build_file, tmp_path / "capture2")
 
 
 def test_build_errors_name_file_and_field(tmp_path: Path):

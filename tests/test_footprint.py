@@ -178,7 +178,7 @@ def test_downsampled_footprint_averages_the_full_resolution_weights():
 
 def test_capture_processing_round_trip_and_errors(tmp_path, monkeypatch):
     K = np.array([[50.0, 0, 15.5], [0, 50.0, 11.5], [0, 0, 1]])
-    processing = SensorProcessing(32, 24, K, DIST, "bilinear", "RGGB")
+    processing = SensorProcessing(32, 24, K, DIST, "bilinear", "RGGB", 0.3)
     image = np.ones((24, 32, 3), np.float32)
     capture = save_capture(tmp_path / "c", [{"name": "v0", "K": K, "R": np.eye(3), "t": [0, 0, 1]}],
                            {"v0": image}, processing={"v0": processing})
@@ -187,6 +187,7 @@ def test_capture_processing_round_trip_and_errors(tmp_path, monkeypatch):
     camera = Camera.from_view(view)
     assert camera.footprint is not None and camera.blur_px == (0.0, 0.0, 0.0)
     assert load_capture(tmp_path / "c").views[0].processing.demosaic == "bilinear"
+    assert load_capture(tmp_path / "c").views[0].processing.lens_blur_px == 0.3
     # A sensor too large for a footprint falls back to blur_px, saying so.
     monkeypatch.setattr("abs.render.camera.MAX_SENSOR_PIXELS", 32 * 24 - 1)
     with pytest.warns(UserWarning, match="too large.*blur_px"):
@@ -197,6 +198,7 @@ def test_capture_processing_round_trip_and_errors(tmp_path, monkeypatch):
                           (lambda p: p.update(cfa_pattern="RGBG"), "processing.v0.cfa_pattern"),
                           (lambda p: p.update(distortion=[0.1, 0.2]), "processing.v0.distortion"),
                           (lambda p: p.update(width=0), "processing.v0.width"),
+                          (lambda p: p.update(lens_blur_px=-0.5), "processing.v0.lens_blur_px"),
                           (lambda p: p.pop("K"), "processing.v0.K"),
                           (lambda p: p.update(colour=1), "processing.v0.colour")):
         broken = json.loads(json.dumps(data))
@@ -226,11 +228,13 @@ def test_a_sample_boost_gives_its_sites_more_samples_and_changes_nothing_else(fo
         assert abs(float(np.mean(images.mean(0) - reference))) < 0.01
 
 
-def test_pose_gradient_under_a_footprint(silhouette_scene_dir):
+@pytest.mark.parametrize("lens_blur_px", [0.0, 0.6])
+def test_pose_gradient_under_a_footprint(silhouette_scene_dir, lens_blur_px):
     """Edge sampling splats a moving silhouette's boundary term into the sensor site whose square
-    holds each edge point, then through the build's weights: forward mode with edges agrees with
-    finite differences of footprint renders (an unlit sphere before a uniform environment: the
-    boundary term is the whole gradient)."""
+    holds each edge point (moved by a draw of the lens's point-spread function when there is
+    one), then through the build's weights: forward mode with edges agrees with finite
+    differences of footprint renders (an unlit sphere before a uniform environment: the boundary
+    term is the whole gradient)."""
     from abs.camera.pinhole import intrinsics_from_fov, look_at
     from abs.render import compile_scene
     from abs.scene import load_scene
@@ -240,7 +244,8 @@ def test_pose_gradient_under_a_footprint(silhouette_scene_dir):
     R, t = look_at(np.array([0.0, 0.05, 0.35]), np.array([0.0, 0.05, 0.0]))
     cam = CameraModel(24, 24, intrinsics_from_fov(24, 24, np.radians(25)), DIST, np.eye(3), np.zeros(3))
     K_new = pinhole_K(cam)
-    fp = processing_footprint(SensorProcessing(24, 24, cam.K, DIST, "bilinear", "RGGB"), K_new, 24, 24)
+    fp = processing_footprint(SensorProcessing(24, 24, cam.K, DIST, "bilinear", "RGGB",
+                                               lens_blur_px), K_new, 24, 24)
     camera = Camera(K_new, R, t, 24, 24, footprint=fp)
     import mitsuba as mi
     # Ramps, so the boundary terms of opposite edges add rather than cancel (steeper weights make
@@ -284,3 +289,31 @@ def test_noise_correlation_is_the_build_weights_outer_product():
         np.testing.assert_allclose(film.correlate(X)[:, c], expected, rtol=1e-4, atol=1e-5)
     diag = np.concatenate([np.sum(fp.weights[c].toarray() ** 2, 1) for c in range(3)])
     assert np.mean(diag) / film.white_noise_std() ** 2 == pytest.approx(1.0, rel=1e-6)
+
+
+def test_a_lens_blur_spreads_each_sites_samples_by_its_point_spread_function():
+    """Samples of a site fall in its square blurred by the lens's Gaussian: their covariance in
+    the camera's pixels is ``J (I / 12 + sigma^2 I) J^T``."""
+    import drjit as dr
+    import mitsuba as mi
+
+    cam = _camera(16, 12)
+    K_new = pinhole_K(cam)
+    sigma = 0.4
+    fp = processing_footprint(SensorProcessing(16, 12, cam.K, DIST, "bilinear", "RGGB", sigma),
+                              K_new, 16, 12)
+    film = Camera(K_new, np.eye(3), np.zeros(3), 16, 12, footprint=fp).film()
+    spp = 20000
+    n = film.sites * film.site_spp(spp)
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(3, n)
+    site, x, y = film.positions(sampler, dr.arange(mi.UInt32, n), spp)
+    site, x, y = site.numpy(), x.numpy(), y.numpy()
+    local = film._local
+    for k in (40, 77):
+        chosen = site == local[k]
+        J = fp.site_jacobian[k]
+        expected = J @ (np.eye(2) * (1 / 12 + sigma ** 2)) @ J.T
+        np.testing.assert_allclose(np.cov(np.stack([x[chosen], y[chosen]])), expected, rtol=0.05,
+                                   atol=2e-3)
+        np.testing.assert_allclose([x[chosen].mean(), y[chosen].mean()], fp.site_center[k], atol=0.01)

@@ -22,8 +22,10 @@ camera of :func:`pinhole_K`, and written with :func:`abs.io.capture.save_capture
 (optional): an image of the photographs' size, drawn on the *original* (distorted) frames,
 nonzero where pixels are compared; it is undistorted with the image (nearest neighbour, and
 pixels that fall outside the original frame are left out) and written as the view's mask.
+``lens_blur_px`` (optional, sensor pixels, default 0): the standard deviation of the lens's
+Gaussian point-spread function, if measured; the build cannot know it and only records it.
 The capture's ``processing`` records, per view, the sensor's calibrated camera, the demosaicing
-method and the CFA pattern, so that fits render each built pixel as the average of exactly the
+method, the CFA pattern and the lens blur, so that fits render each built pixel as the average of exactly the
 sensor sites it was made from (:mod:`abs.acquisition.footprint`). Its ``blur_px`` is the blur that
 this demosaicing and undistortion add (:func:`abs.acquisition.blur.processing_blur`, its variance
 averaged over the views): what readers that ignore ``processing`` blur their renderings by.
@@ -176,6 +178,10 @@ def build_capture(build_file: str | Path, out: str | Path,
         raise InputError(demosaic_source, demosaic_field, f"expected one of "
                                                           f"{', '.join(DEMOSAIC_METHODS)}, got "
                                                           f"{demosaic!r}")
+    lens_blur = spec.get("lens_blur_px", 0.0)
+    if isinstance(lens_blur, bool) or not isinstance(lens_blur, (int, float)) or not 0 <= lens_blur <= 10:
+        raise InputError(source, "lens_blur_px", f"expected a standard deviation in [0, 10] sensor "
+                                                 f"pixels, got {lens_blur!r}")
     superpixel = demosaic == "superpixel"
     views, images, masks, merges, blurs, blur_keys, processing = [], {}, {}, {}, {}, [], {}
     for i, entry in enumerate(spec["views"]):
@@ -218,7 +224,8 @@ def build_capture(build_file: str | Path, out: str | Path,
             first = next(f for f in entry["frames"] if Path(f).suffix.lower() != ".exr")
             pattern = read_raw(folder / first).cfa_pattern or cfa
         processing[entry["name"]] = SensorProcessing(
-            cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern)
+            cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern,
+            float(lens_blur))
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))

@@ -88,16 +88,19 @@ class Footprint:
     processing: SensorProcessing
     K_new: np.ndarray
 
-    def site_at(self, xy: np.ndarray) -> np.ndarray:
+    def site_at(self, xy: np.ndarray, jitter: np.ndarray | None = None) -> np.ndarray:
         """The sensor site (index into ``site_center``) whose square holds each built-image point
         ``xy`` (``(N, 2)``, pixels), ``-1`` off the sensor: the point projected through the
-        calibrated distortion (``cv2.projectPoints``) and rounded to the nearest site."""
+        calibrated distortion (``cv2.projectPoints``), moved by ``jitter`` (``(N, 2)`` sensor
+        pixels, optional: a draw of the lens's point-spread function) and rounded to the nearest
+        site."""
         xy = np.asarray(xy, np.float64).reshape(-1, 2)
         rays = np.linalg.solve(self.K_new, np.column_stack([xy, np.ones(len(xy))]).T).T
         sensor, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
                                       np.asarray(self.processing.K, np.float64),
                                       np.asarray(self.processing.distortion, np.float64))
-        sx, sy = np.round(sensor.reshape(-1, 2)).astype(np.int64).T
+        sensor = sensor.reshape(-1, 2) + (0.0 if jitter is None else jitter)
+        sx, sy = np.round(sensor).astype(np.int64).T
         w, h = self.processing.width, self.processing.height
         on = (sx >= 0) & (sx < w) & (sy >= 0) & (sy < h)
         return np.where(on, sy * w + sx, -1)

@@ -28,7 +28,9 @@ A capture folder holds ``cameras.json`` next to the photographs::
   photograph from its camera's sensor: the sensor's size (pixels), its calibrated matrix ``K``
   and OpenCV ``distortion`` coefficients (4, 5, 8, 12 or 14), the ``demosaic`` method
   (``"bilinear"``, ``"superpixel"``, or ``null`` for frames that were RGB already) and the
-  ``cfa_pattern`` (``RGGB``, ``BGGR``, ``GRBG``, ``GBRG``; ``null`` without demosaicing). With
+  ``cfa_pattern`` (``RGGB``, ``BGGR``, ``GRBG``, ``GBRG``; ``null`` without demosaicing), and
+  optionally ``lens_blur_px``, the standard deviation in sensor pixels of the lens's Gaussian
+  point-spread function (the build cannot know it; default 0). With
   it, renderings of the view average exactly the sensor sites each built pixel averages
   (:mod:`abs.acquisition.footprint`) instead of being blurred by ``blur_px``. Readers that ignore
   it use ``blur_px``.
@@ -62,7 +64,7 @@ ROTATION_TOL = 1e-5  # max |R^T R - I| and |det R - 1| accepted as a rotation
 _NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,127}")
 _VIEW_KEYS = {"name", "image", "K", "R", "t", "holdout", "mask"}
 _REQUIRED_KEYS = ("name", "image", "K", "R", "t")
-_PROCESSING_KEYS = {"width", "height", "K", "distortion", "demosaic", "cfa_pattern"}
+_PROCESSING_KEYS = {"width", "height", "K", "distortion", "demosaic", "cfa_pattern", "lens_blur_px"}
 # The demosaicing methods of abs.acquisition.demosaic (None: frames that were RGB already) and
 # Bayer patterns, repeated here because file formats sit below the acquisition code.
 _DEMOSAIC = ("bilinear", "superpixel", None)
@@ -174,8 +176,12 @@ def _check_processing(value: Any, source: Path | None, field: str) -> "SensorPro
     if demosaic is not None and pattern not in _CFA:
         raise CaptureError(source, f"{field}.cfa_pattern", f"expected one of {', '.join(_CFA)} "
                                                            f"(demosaic {demosaic}), got {pattern!r}")
+    blur = value.get("lens_blur_px", 0.0)
+    if isinstance(blur, bool) or not isinstance(blur, (int, float)) or not 0 <= blur <= 10:
+        raise CaptureError(source, f"{field}.lens_blur_px", f"expected a standard deviation in "
+                                                            f"[0, 10] sensor pixels, got {blur!r}")
     return SensorProcessing(size[0], size[1], _read_only(K), _read_only(distortion), demosaic,
-                            None if demosaic is None else pattern)
+                            None if demosaic is None else pattern, float(blur))
 
 
 def _read_only(arr: np.ndarray) -> np.ndarray:
@@ -207,6 +213,10 @@ class SensorProcessing:
         brackets: undistortion only).
     cfa_pattern : str or None
         The Bayer pattern of the raw frames (``None`` without demosaicing).
+    lens_blur_px : float
+        Standard deviation of a Gaussian point-spread function of the lens (and any optical
+        low-pass filter) on the sensor, sensor pixels: what reaches a site is the light blurred
+        by it. The build cannot know it (0 unless given: ``lens_blur_px`` in the file).
     """
 
     width: int
@@ -215,17 +225,22 @@ class SensorProcessing:
     distortion: np.ndarray
     demosaic: str | None
     cfa_pattern: str | None = None
+    lens_blur_px: float = 0.0
 
     def key(self) -> tuple:
         """The values as a hashable tuple (equal processings have equal keys)."""
         return (self.width, self.height, tuple(np.asarray(self.K, float).ravel()),
-                tuple(np.asarray(self.distortion, float).ravel()), self.demosaic, self.cfa_pattern)
+                tuple(np.asarray(self.distortion, float).ravel()), self.demosaic, self.cfa_pattern,
+                float(self.lens_blur_px))
 
     def to_json(self) -> dict[str, Any]:
-        return {"width": int(self.width), "height": int(self.height),
-                "K": np.asarray(self.K, float).tolist(),
-                "distortion": np.asarray(self.distortion, float).tolist(),
-                "demosaic": self.demosaic, "cfa_pattern": self.cfa_pattern}
+        out = {"width": int(self.width), "height": int(self.height),
+               "K": np.asarray(self.K, float).tolist(),
+               "distortion": np.asarray(self.distortion, float).tolist(),
+               "demosaic": self.demosaic, "cfa_pattern": self.cfa_pattern}
+        if self.lens_blur_px:
+            out["lens_blur_px"] = float(self.lens_blur_px)
+        return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -167,7 +167,7 @@ def boundary_term(tracer, scene, env, camera, meshes: list[MovingMesh], n_sample
         # Into the sensor site whose square holds the edge point (a site's value is its square's
         # mean), then to pixels with the build's weights (abs.render.footprint).
         film = camera.film()
-        site, inverse_area = film.sites_at(x)
+        site, inverse_area = film.sites_at(x, rng)
         inside = site >= 0
         index = from_numpy(mi.UInt32, np.where(inside, site, 0), np.uint32)
         weight = from_numpy(mi.Float, inverse_area)

@@ -12,14 +12,17 @@ interpolated from up to four red sites, is no noisier than a tent-filtered pixel
 pixel's own samples from its sites instead would spend two thirds of them on sites of other
 colours.)
 
+A lens blur (``lens_blur_px`` of the capture's processing, a Gaussian point-spread function on the
+sensor) moves each sample by a draw of it: a site then sees the light of its square blurred.
+
 Everything here is linear in the sites' values, so derivatives pass through unchanged: the
 forward-mode tangent is filmed like the radiance, path replay's adjoint is ``P^T`` of the image's
 adjoint, a path-length recording bins each sample's light into every pixel that uses its site,
 with that pixel's weight, and edge sampling puts a moving silhouette's boundary term into the site
-whose square holds each edge point (:meth:`FootprintFilm.sites_at`). Downsampled cameras (``block > 1``) average the full-resolution rows of
-``P`` over each block; a sample boost gives its factor to every site a pixel of its rectangle
-uses. The tables are built once per footprint and block (NumPy) and copied to
-Dr.Jit once per variant.
+whose square holds each edge point (:meth:`FootprintFilm.sites_at`). Downsampled cameras
+(``block > 1``) average the full-resolution rows of ``P`` over each block; a sample boost gives its
+factor to every site a pixel of its rectangle uses. The tables are built once per footprint,
+block, size and boost (NumPy) and copied to Dr.Jit once per variant.
 """
 
 from __future__ import annotations
@@ -106,6 +109,7 @@ class FootprintFilm:
             shift = (block - 1) / 2.0
             c, j = (c - shift) / block, j / block
         self._footprint = footprint
+        self.lens_blur = float(footprint.processing.lens_blur_px)
         self._forward_numpy = t.forward
         self._size = (height, width)
         self._local = np.full(footprint.site_center.shape[0], -1, np.int64)
@@ -183,6 +187,10 @@ class FootprintFilm:
             j = dr.select(extra, lane - base, 0) // opaque(mi.UInt32, per * (self.factor - 1))
             site = dr.select(extra, dr.gather(mi.UInt32, self.boosted_sites, j), site)
         offset = sampler.next_2d() - 0.5
+        if self.lens_blur > 0:
+            # The lens's point-spread function: light reaching the square from around it.
+            offset = offset + mi.warp.square_to_std_normal(sampler.next_2d()) * opaque(
+                mi.Float, self.lens_blur)
         x = (dr.gather(mi.Float, self.cx, site) + dr.gather(mi.Float, self.j[0][0], site) * offset.x
              + dr.gather(mi.Float, self.j[0][1], site) * offset.y)
         y = (dr.gather(mi.Float, self.cy, site) + dr.gather(mi.Float, self.j[1][0], site) * offset.x
@@ -208,14 +216,17 @@ class FootprintFilm:
         return self.image([self._site_means(value, spp)
                            for value in (radiance.x, radiance.y, radiance.z)], width, height)
 
-    def sites_at(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def sites_at(self, xy: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """For points ``xy`` (``(N, 2)``, the camera's pixels): the rendered site whose square
-        holds each (``-1`` for none) and ``1 /`` that square's area in the camera's pixels^2 (a
-        site's value is the mean over its square)."""
+        holds each (``-1`` for none; with a lens blur, the square holding the point moved by a
+        draw of the point-spread function from ``rng``: the site's share of the point's light,
+        on average) and ``1 /`` that square's area in the camera's pixels^2 (a site's value is
+        the mean over its square)."""
         xy = np.asarray(xy, np.float64)
         if self.block > 1:
             xy = xy * self.block + (self.block - 1) / 2.0  # the full-resolution image's pixels
-        site = self._footprint.site_at(xy)
+        jitter = rng.normal(0.0, self.lens_blur, xy.shape) if self.lens_blur > 0 else None
+        site = self._footprint.site_at(xy, jitter)
         local = np.where(site >= 0, self._local[np.maximum(site, 0)], -1)
         inverse_area = np.where(local >= 0, 1.0 / self._area[np.maximum(local, 0)], 0.0)
         return local, inverse_area
