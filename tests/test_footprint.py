@@ -207,6 +207,11 @@ def test_capture_processing_round_trip_and_errors(tmp_path, monkeypatch):
         with pytest.raises(CaptureError, match=field.replace(".", r"\.")):
             load_capture(tmp_path / "c")
     broken = json.loads(json.dumps(data))
+    broken["processing"]["v0"]["width"] = 64
+    (tmp_path / "c" / "cameras.json").write_text(json.dumps(broken))
+    with pytest.raises(CaptureError, match=r"processing\.v0: a 32x24 photograph cannot come"):
+        load_capture(tmp_path / "c")
+    broken = json.loads(json.dumps(data))
     broken["processing"]["v9"] = broken["processing"]["v0"]
     (tmp_path / "c" / "cameras.json").write_text(json.dumps(broken))
     with pytest.raises(CaptureError, match="no view has this name"):

@@ -470,6 +470,14 @@ def load_capture(folder: str | Path) -> Capture:
                   replace(view, processing=_check_processing(processing[view.name], source,
                                                              f"processing.{view.name}"))
                   for view in parsed]
+        for view in parsed:
+            p = view.processing
+            factor = 2 if p is not None and p.demosaic == "superpixel" else 1
+            if p is not None and (view.width * factor, view.height * factor) != (p.width, p.height):
+                raise CaptureError(source, f"processing.{view.name}",
+                                   f"a {view.width}x{view.height} photograph cannot come from the "
+                                   f"{p.width}x{p.height} sensor by demosaic {p.demosaic} (was the "
+                                   "photograph resized after the build?)")
     return Capture(folder=folder, views=tuple(parsed))
 
 

@@ -6,7 +6,8 @@ is known in advance, so both are estimated from the images themselves.
 
 The estimate assumes noise independent from pixel to pixel. A photograph built from a raw sensor
 is not: demosaicing interpolates a site's noise into its neighbours, which the estimator's
-Laplacian largely cancels (a bilinear build's noise reads about half its true level). For a camera
+Laplacian largely cancels (a bilinear build's noise reads a third to a sixth of its true level:
+the glass benchmark's raw-built sphere, a flat test in tests/test_footprint.py). For a camera
 that renders the build's processing (a footprint) the estimate is scaled by what the build's own
 weights do to independent site noise, measured once per camera by pushing white noise through
 them; a footprint rendering's Monte-Carlo noise, made per site and spread alike, gets the same.
