@@ -323,3 +323,19 @@ def test_checks_warn_of_a_too_narrow_noise_model_and_an_unfinished_chain():
     assert "1.69 times" in narrow and "1.30x" in narrow  # intervals too narrow by sqrt(chi^2)
     [short] = run_checks({**done, "converged": False, "stop_reason": "max_evaluations", "steps": 3})
     assert "max_evaluations" in short and "3 steps" in short
+
+
+def test_noise_correlation_widens_the_likelihood_of_correlated_views():
+    """A built capture's view (pixels whose noise demosaicing spread) has its variances multiplied
+    per channel by its correlation factors; an ordinary view keeps them."""
+    from abs.sampling.likelihood import NoiseModel
+
+    masks = [np.ones((2, 2), bool), np.ones((1, 3), bool)]
+    render = [np.full((2, 2, 3), 0.02), np.full((1, 3, 3), 0.04)]
+    plain = NoiseModel(np.array([0.01, 0.03]), render)
+    built = NoiseModel(np.array([0.01, 0.03]), render,
+                       correlation=np.array([[7.9, 3.9, 7.9], [1.0, 1.0, 1.0]]))
+    a, b = plain.residual_variance(masks), built.residual_variance(masks)
+    np.testing.assert_allclose(b[:12].reshape(4, 3) / a[:12].reshape(4, 3), [[7.9, 3.9, 7.9]] * 4)
+    np.testing.assert_allclose(b[12:], a[12:])
+    assert built.to_dict()["noise_correlation"][0] == [7.9, 3.9, 7.9]

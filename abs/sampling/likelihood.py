@@ -93,6 +93,14 @@ class NoiseModel:
     render_pairs : int
         Independent seed pairs the likelihood's residuals average (1, or ``K + 1`` once
         recentred on ``K`` further pairs by :mod:`abs.sampling.calibration`).
+    correlation : ndarray, shape (V, 3), optional
+        Per view and channel, the factor by which the pixels' noise correlation shrinks the
+        information they carry (1: independent pixels). A capture built from raw photographs
+        spreads each sensor site's noise over neighbouring pixels (demosaicing), and a likelihood
+        that treats its pixels as independent is too narrow; its variances are multiplied by the
+        mean row sum of the noise's correlation matrix ``K`` (for a smooth signal ``J^T K J``
+        is that many times ``J^T J``: a magnitude adjustment of the composite likelihood,
+        :meth:`abs.render.footprint.FootprintFilm.correlate`).
     """
 
     photo_variance: np.ndarray
@@ -100,13 +108,17 @@ class NoiseModel:
     immerkaer_sd: np.ndarray | None = None
     render_scale: float = 1.0
     render_pairs: int = 1
+    correlation: np.ndarray | None = None
 
     def residual_variance(self, masks: list[np.ndarray]) -> np.ndarray:
         """Variance of each residual (the order of ``FitProblem.residuals``) of the likelihood's
-        rendering: the average of ``render_pairs`` pairs of independent renders."""
+        rendering: the average of ``render_pairs`` pairs of independent renders (times the
+        views' :attr:`correlation` factors)."""
         share = self.render_scale / (2 * self.render_pairs)
-        parts = [(p + share * v)[m].ravel()
-                 for p, v, m in zip(self.photo_variance, self.render_variance, masks)]
+        factors = (np.ones((len(masks), 3)) if self.correlation is None
+                   else np.asarray(self.correlation, np.float64))
+        parts = [((p + share * v) * f)[m].ravel()
+                 for p, v, m, f in zip(self.photo_variance, self.render_variance, masks, factors)]
         return np.concatenate(parts)
 
     def render_part(self, masks: list[np.ndarray]) -> np.ndarray:
@@ -119,4 +131,6 @@ class NoiseModel:
                "render_scale": float(self.render_scale), "render_pairs": int(self.render_pairs)}
         if self.immerkaer_sd is not None:
             out["photo_sd_immerkaer"] = np.asarray(self.immerkaer_sd).tolist()
+        if self.correlation is not None:
+            out["noise_correlation"] = np.asarray(self.correlation).tolist()
         return out

@@ -256,6 +256,8 @@ def _write_meta(path: Path, identity: dict, noise: NoiseModel, start: dict,
         g["mode"] = mode
         g.attrs["render_scale"] = float(noise.render_scale)
         g.attrs["render_pairs"] = int(noise.render_pairs)
+        if noise.correlation is not None:
+            g["noise_correlation"] = noise.correlation
         if offset is not None:
             g["residual_offset"] = offset
         for k, v in enumerate(noise.render_variance):
@@ -273,7 +275,9 @@ def _read_meta(path: Path, identity: dict) -> tuple[NoiseModel, dict, np.ndarray
             noise = NoiseModel(np.asarray(g["photo_variance"]),
                                [np.asarray(g[f"render_variance_{k}"]) for k in range(n)],
                                render_scale=float(g.attrs.get("render_scale", 1.0)),
-                               render_pairs=int(g.attrs.get("render_pairs", 1)))
+                               render_pairs=int(g.attrs.get("render_pairs", 1)),
+                               correlation=(np.asarray(g["noise_correlation"])
+                                            if "noise_correlation" in g else None))
             offset = np.asarray(g["residual_offset"]) if "residual_offset" in g else None
             if offset is not None and offset.ndim == 1:
                 # Older chain files kept one offset for both renders: continue them with the
@@ -317,7 +321,13 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
             weight = 1.0 / np.square(variance + half_render)
             variance = max(float(np.sum(weight * excess) / np.sum(weight)) * dof, 1e-12)
         photo.append(variance)
-    return NoiseModel(np.array(photo), renders, np.array(immerkaer))
+    correlation = None
+    if any(obs.camera.footprint is not None for obs in problem.observations):
+        correlation = np.array([np.ones(3) if obs.camera.footprint is None else
+                                obs.camera.film().correlate(
+                                    np.ones((obs.camera.width * obs.camera.height, 3, 1)))[..., 0]
+                                .mean(axis=0) for obs in problem.observations])
+    return NoiseModel(np.array(photo), renders, np.array(immerkaer), correlation=correlation)
 
 
 def _initial_walkers(posterior, theta: np.ndarray, stderr: np.ndarray, walkers: int,
