@@ -98,8 +98,9 @@ def test_recovers_glass_absorption_per_channel_and_environment_scale(tmp_path):
     # Both parameters reweight path-length recordings: two recordings per training view and
     # seed pair (7 pairs, 2 views), one per view for the before/after images, one for the pixel
     # noise, one per training view for the Laplace part's second residual (the renders' noise
-    # left out); no Jacobian, trial point or scan point renders.
-    assert result.renders == 7 * 2 * 2 + 3 + 1 + 2, result.renders
+    # left out), one per holdout view for the fitted rendering's own noise; no Jacobian, trial
+    # point or scan point renders.
+    assert result.renders == 7 * 2 * 2 + 3 + 1 + 2 + 1, result.renders
     scan = result.summary()["scan"]
     assert scan["parameter"] == "glass.absorption" and len(scan["channels"]) == 3
 
@@ -171,4 +172,61 @@ def test_recovers_a_tied_ior_through_glass_before_a_checkerboard(tmp_path):
     assert stderr < 0.006, stderr
     assert abs(ior[0] - 1.52) < min(0.01, 3 * stderr), (ior, stderr)
     assert result.vector.labels()[0] == "glass.ior (tied)"
+    _check_holdout_improves(result)
+
+
+def test_recovers_glass_absorption_from_a_raw_built_capture(tmp_path):
+    """The acquisition path end to end: photographs taken by a simulated camera (barrel
+    distortion, an RGGB sensor, 16-bit raw frames with read noise), built by ``build_capture``
+    (bilinear demosaicing, undistortion; ``processing`` in ``cameras.json``), fitted: the fit
+    renders the build's processing and recovers what a simulated capture gives."""
+    import json
+
+    import cv2
+
+    from abs.acquisition.build import build_capture
+    from abs.acquisition.camera_file import CameraModel, write_camera_file
+    from abs.acquisition.demosaic import cfa_masks
+    from abs.render import Camera, compile_scene
+    from abs.simulate import place_cameras
+    from test_footprint import DIST, _sensor_photograph
+
+    template = _HEAD + _GLASS + _FLOOR + '\n[fit]\nparameters = ["glass.absorption", "environment.scale"]\n'
+    truth = {"scale": 1.0, "ior": [1.5, 1.5, 1.5], "absorption": [5.0, 8.0, 12.0]}
+    gain = 1.0e4  # data numbers per unit radiance in the 1 s frames
+    _assets(tmp_path)
+    (tmp_path / "truth.toml").write_text(template.format(**truth))
+    (tmp_path / "start.toml").write_text(template.format(**{**truth, "scale": 1.3 * gain,
+                                                            "absorption": [8.0, 8.0, 8.0]}))
+    compiled = compile_scene(load_scene(tmp_path / "truth.toml"))
+    raw = tmp_path / "raw"
+    raw.mkdir()
+    rng = np.random.default_rng(3)
+    cameras, views = {}, []
+    for i, view in enumerate(place_cameras(compiled, 3, 64, 48)):
+        cam = CameraModel(64, 48, np.asarray(view["K"]), DIST, R=np.asarray(view["R"]),
+                          t=np.asarray(view["t"]))
+        pinhole = Camera(np.asarray(view["K"]), np.asarray(view["R"]), np.asarray(view["t"]), 64, 48)
+        sensor = _sensor_photograph(compiled, pinhole, cam, 2, 1024)
+        mosaic = np.sum(sensor * gain * cfa_masks((48, 64), "RGGB"), -1) + rng.normal(0, 30, (48, 64))
+        cv2.imwrite(str(raw / f"v{i}.tif"), np.clip(np.round(mosaic + 100), 0, 65535).astype(np.uint16))
+        cameras[f"cam{i}"] = cam
+        views.append({"name": f"v{i}", "camera": f"cam{i}", "frames": [f"v{i}.tif"],
+                      "holdout": i == 2})
+    cv2.imwrite(str(raw / "dark.tif"), np.full((48, 64), 100, np.uint16))
+    for v in views:
+        v["darks"] = ["dark.tif"]
+    write_camera_file(raw / "cameras.json", cameras)
+    (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
+                                                "views": views}))
+    capture, _ = build_capture(raw / "build.json", tmp_path / "capture")
+    assert all(v.processing is not None for v in capture.views)
+    result = fit(tmp_path / "start.toml", tmp_path / "capture",
+                 settings=FitSettings(spp=32, max_iterations=12, refinement_steps=6))
+    absorption = result.values["glass.absorption"]
+    stderr = result.vector.split(result.uncertainty.stderr)["glass.absorption"]
+    assert not result.checks, result.checks
+    assert np.all(np.abs(absorption / truth["absorption"] - 1) < 0.1), absorption
+    assert np.all(np.abs(absorption - truth["absorption"]) < 4 * stderr + 1e-9), (absorption, stderr)
+    assert abs(result.values["environment.scale"][0] / gain - 1.0) < 0.02
     _check_holdout_improves(result)
