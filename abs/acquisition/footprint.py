@@ -25,8 +25,9 @@ signal per pixel; with the Gaussian, the end-to-end benchmark's glass absorption
 The weights are measured, not derived, like :mod:`.blur`'s variances: raw images holding a one at
 every eighth site in each direction (64 phases) go through the build's own
 :func:`~abs.acquisition.demosaic.demosaic` and :func:`~abs.acquisition.undistort.remap_bilinear`
-as the build runs them (float32), and each built pixel's response to each phase is the weight of the one site of that
-phase within its reach (eight sites apart, the reach of four cannot see two). Every detail of the
+as the build runs them (float32), and each built pixel's response to each phase is the weight of
+the one site of that phase within its reach (eight sites apart, the reach of four cannot see
+two). Every detail of the
 pipeline counts: the demosaic's reflected borders, the resampling's 1/32-pixel weights and its
 black outside the sensor. A site's square is mapped to the built image through the calibrated
 distortion (``cv2.undistortPoints``), linearised over the square (the map's curvature across one

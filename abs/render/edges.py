@@ -8,8 +8,8 @@ the (continuous) interior misses. For a pixel filter ``k`` the term is
     d/dtheta I_p = integral over silhouette edges of k(x - p) (L_minus - L_plus) (dx/dtheta . n) dl
 
 with ``n`` the edge's unit normal in the image (for a camera with a footprint, ``k`` is a
-sensor site's square, then the build's weights: :mod:`abs.render.footprint`) and ``L_plus``, ``L_minus`` the radiance just on
-either side. We sample points on the projected silhouette edges in proportion to their length,
+sensor site's square, then the build's weights: :mod:`abs.render.footprint`) and ``L_plus``,
+``L_minus`` the radiance just on either side. We sample points on the projected silhouette edges in proportion to their length,
 estimate both radiances with the path tracer (detached), and attach the edge point's image
 position to the parameters through the mesh's attached vertex positions. The returned image is
 zero in value and carries exactly the boundary term in its derivative.
