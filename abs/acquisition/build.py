@@ -61,7 +61,19 @@ def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
                white_level: float | None = None, demosaic: str = "bilinear",
                source: str | Path | None = None,
                field: str = "") -> tuple[np.ndarray, np.ndarray]:
-    """One frame as ``(H, W, 3)`` linear values (data numbers) and its saturation mask.
+    """One frame as ``(H, W, 3)`` linear values (data numbers) and its saturation mask
+    (:func:`_read_frame` without the Bayer pattern it used)."""
+    rgb, saturated, _ = _read_frame(path, cfa_pattern, saturation, white_level, demosaic, source,
+                                    field)
+    return rgb, saturated
+
+
+def _read_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
+                white_level: float | None = None, demosaic: str = "bilinear",
+                source: str | Path | None = None,
+                field: str = "") -> tuple[np.ndarray, np.ndarray, str | None]:
+    """One frame as ``(H, W, 3)`` linear values (data numbers), its saturation mask and the
+    Bayer pattern it was demosaiced with (``None`` for an EXR frame).
 
     Raw mosaics are demosaiced (CFA pattern from the file, else ``cfa_pattern``), with the black
     level subtracted. ``demosaic="bilinear"``: a demosaiced pixel is saturated when any mosaic
@@ -83,7 +95,7 @@ def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
                                                     "mosaic: demosaic \"superpixel\" needs raw "
                                                     "mosaics (use \"bilinear\" for EXR frames)")
         rgb = read_image(path).astype(np.float64)
-        return rgb, np.zeros(rgb.shape, bool)
+        return rgb, np.zeros(rgb.shape, bool), None
     frame = read_raw(path)
     pattern = frame.cfa_pattern or cfa_pattern
     if pattern is None:
@@ -99,18 +111,19 @@ def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
                              "even width and height (crop one row or column of every frame, "
                              "dark and mask, or use \"bilinear\")")
         rgb = demosaic_superpixel(frame.mosaic - frame.black_level, pattern).astype(np.float64)
-        return rgb, superpixel_any(clipped, pattern)
+        return rgb, superpixel_any(clipped, pattern), pattern
     sites = cfa_masks(frame.mosaic.shape, pattern)
     near_clipped = np.stack([cv2.dilate((clipped & sites[..., c]).astype(np.uint8),
                                         np.ones((3, 3), np.uint8)).astype(bool)
                              for c in range(3)], axis=-1)
     rgb = demosaic_bilinear(frame.mosaic - frame.black_level, pattern).astype(np.float64)
-    return rgb, near_clipped
+    return rgb, near_clipped, pattern
 
 
 def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path,
               field: str, white_level: float | None = None,
-              demosaic: str = "bilinear") -> MergedHDR:
+              demosaic: str = "bilinear") -> tuple[MergedHDR, str | None]:
+    """A view's frames merged, and the Bayer pattern of its raw frames (``None``: all EXR)."""
     frames = entry["frames"]
     if not isinstance(frames, list) or not frames:
         raise InputError(source, f"{field}.frames", "expected a non-empty list of files")
@@ -118,9 +131,11 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
     if not isinstance(exposures, list) or len(exposures) != len(frames):
         raise InputError(source, f"{field}.exposures_s", f"expected {len(frames)} exposure times "
                                                          "(seconds), one per frame")
-    loaded = [load_frame(folder / f, cfa, white_level=white_level, demosaic=demosaic,
-                         source=source, field=f"{field}.frames[{k}]")
-              for k, f in enumerate(frames)]
+    read = [_read_frame(folder / f, cfa, white_level=white_level, demosaic=demosaic,
+                        source=source, field=f"{field}.frames[{k}]")
+            for k, f in enumerate(frames)]
+    loaded = [(img, saturated) for img, saturated, _ in read]
+    pattern = next((p for _, _, p in read if p is not None), None)
     shapes = {img.shape for img, _ in loaded}
     if len(shapes) > 1:
         raise InputError(source, f"{field}.frames", f"mixed image sizes {sorted(shapes)}")
@@ -138,7 +153,7 @@ def _view_hdr(entry: dict[str, Any], folder: Path, cfa: str | None, source: Path
                                                  f"frames {loaded[0][0].shape[1]}x"
                                                  f"{loaded[0][0].shape[0]}: mixed image sizes")
     return merge_brackets([img for img, _ in loaded], exposures, np.inf, darks,
-                          saturated=[sat for _, sat in loaded], source=f"{source}: {field}")
+                          saturated=[sat for _, sat in loaded], source=f"{source}: {field}"), pattern
 
 
 def build_capture(build_file: str | Path, out: str | Path,
@@ -200,7 +215,7 @@ def build_capture(build_file: str | Path, out: str | Path,
                                                         f"camera file; known: "
                                                         f"{', '.join(sorted(cameras))}")
         cam = cameras[entry["camera"]]
-        merged = _view_hdr(entry, folder, cfa, source, field, white_level, demosaic)
+        merged, pattern = _view_hdr(entry, folder, cfa, source, field, white_level, demosaic)
         factor = 2 if superpixel else 1
         h_img, w_img = (factor * n for n in merged.radiance.shape[:2])
         if (h_img, w_img) != (cam.height, cam.width):
@@ -219,10 +234,6 @@ def build_capture(build_file: str | Path, out: str | Path,
             except ValueError as exc:
                 raise InputError(source, f"{field}.camera", f"{entry['camera']}: {exc}") from None
         blur_keys.append(key)
-        pattern = None
-        if raw:
-            first = next(f for f in entry["frames"] if Path(f).suffix.lower() != ".exr")
-            pattern = read_raw(folder / first).cfa_pattern or cfa
         processing[entry["name"]] = SensorProcessing(
             cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern,
             float(lens_blur))
