@@ -144,16 +144,23 @@ def _check_blur(value: Any, source: Path | None, field: str) -> tuple[float, flo
     return tuple(float(b) for b in blur)
 
 
-def _check_processing(value: Any, source: Path | None, field: str) -> "SensorProcessing":
+def _check_keys(value: Any, allowed: set[str], required, source: Path | None, field: str) -> None:
+    """``value`` is an object whose keys are ``allowed`` (or comments, ``_...``) and include
+    every ``required`` one."""
     if not isinstance(value, Mapping):
         raise CaptureError(source, field, f"expected an object, got {type(value).__name__}")
-    unknown = sorted(k for k in value if k not in _PROCESSING_KEYS and not k.startswith("_"))
+    unknown = sorted(k for k in value if k not in allowed and not k.startswith("_"))
     if unknown:
         raise CaptureError(source, f"{field}.{unknown[0]}", f"unknown key; allowed keys are "
-                                                            f"{', '.join(sorted(_PROCESSING_KEYS))}")
-    for key in ("width", "height", "K", "distortion", "demosaic"):
+                                                            f"{', '.join(sorted(allowed))}")
+    for key in required:
         if key not in value:
             raise CaptureError(source, f"{field}.{key}", "missing")
+
+
+def _check_processing(value: Any, source: Path | None, field: str) -> "SensorProcessing":
+    _check_keys(value, _PROCESSING_KEYS, ("width", "height", "K", "distortion", "demosaic"),
+                source, field)
     size = []
     for key in ("width", "height"):
         n = value[key]
@@ -386,15 +393,7 @@ def _image_size(path: Path, source: Path, field: str,
 def _parse_view(entry: Any, index: int, folder: Path, source: Path,
                 blur_px: tuple[float, float, float]) -> View:
     field = f"views[{index}]"
-    if not isinstance(entry, dict):
-        raise CaptureError(source, field, f"expected an object, got {type(entry).__name__}")
-    unknown = sorted(k for k in entry if k not in _VIEW_KEYS and not k.startswith("_"))
-    if unknown:
-        raise CaptureError(source, f"{field}.{unknown[0]}", f"unknown key; allowed keys are "
-                                                            f"{', '.join(sorted(_VIEW_KEYS))}")
-    for key in _REQUIRED_KEYS:
-        if key not in entry:
-            raise CaptureError(source, f"{field}.{key}", "missing")
+    _check_keys(entry, _VIEW_KEYS, _REQUIRED_KEYS, source, field)
     name = _check_name(entry["name"], source, f"{field}.name")
     K = _check_K(entry["K"], source, f"{field}.K")
     R = _check_R(entry["R"], source, f"{field}.R")
