@@ -47,6 +47,7 @@ class _Tables:
 
     sites: np.ndarray          # (M,) the sensor sites rendered (indices into the footprint's)
     pixels: int                # the camera's pixels
+    weights: list              # per channel: P_c, (pixels, M) CSR over the rendered sites
     forward: list              # per channel: (idx (pixels, N_c) into sites, weight (pixels, N_c))
     transpose: list            # per channel: (pixel (M, T_c), weight (M, T_c))
 
@@ -79,10 +80,10 @@ def _tables(footprint: Footprint, block: int, width: int, height: int) -> _Table
     elif (width, height) != (footprint.width, footprint.height):
         weights = tuple(_crop(P, footprint, width, height) for P in weights)
     used = np.unique(np.concatenate([P.indices for P in weights]))
-    local = [P[:, used].tocsr() for P in weights]
+    local = [P[:, used].astype(np.float64).tocsr() for P in weights]
     forward = [_padded_rows(P) for P in local]
     transpose = [_padded_rows(P.T.tocsr()) for P in local]
-    return _Tables(used, width * height, forward, transpose)
+    return _Tables(used, width * height, local, forward, transpose)
 
 
 def _crop(P, footprint: Footprint, width: int, height: int):
@@ -110,7 +111,7 @@ class FootprintFilm:
             c, j = (c - shift) / block, j / block
         self._footprint = footprint
         self.lens_blur = float(footprint.processing.lens_blur_px)
-        self._forward_numpy = t.forward
+        self._weights = t.weights
         self._size = (height, width)
         self._local = np.full(footprint.site_center.shape[0], -1, np.int64)
         self._local[t.sites] = np.arange(self.sites)
@@ -139,8 +140,8 @@ class FootprintFilm:
         """The camera's ``(height, width, 3)`` image of per-channel site values ``(sites, 3)``
         (NumPy, float64): the build's weights, as :meth:`image` applies them in Dr.Jit."""
         values = np.asarray(site_values, np.float64)
-        return np.stack([np.sum(w * values[idx, c], axis=1)
-                         for c, (idx, w) in enumerate(self._forward_numpy)], -1).reshape(*self._size, 3)
+        return np.stack([P @ values[:, c] for c, P in enumerate(self._weights)],
+                        -1).reshape(*self._size, 3)
 
     def correlate(self, X: np.ndarray) -> np.ndarray:
         """``K X`` for ``X`` of shape ``(pixels, 3, n)`` (the camera's pixels row-major, per
@@ -148,19 +149,13 @@ class FootprintFilm:
         level on every site takes through the build's weights, ``k`` making its mean diagonal 1
         (:meth:`white_noise_std` squared)."""
         X = np.asarray(X, np.float64)
-        out = np.zeros_like(X)
         k = self.white_noise_std() ** 2
-        for c, (idx, w) in enumerate(self._forward_numpy):
-            sites = np.zeros((self.sites, X.shape[2]))
-            np.add.at(sites, idx.ravel(), (w[..., None] * X[:, c, None, :]).reshape(-1, X.shape[2]))
-            out[:, c] = np.einsum("pn,pnk->pk", w, sites[idx]) / k
-        return out
+        return np.stack([P @ (P.T @ X[:, c]) / k for c, P in enumerate(self._weights)], axis=1)
 
     def white_noise_std(self) -> float:
         """The per-pixel standard deviation (RMS over pixels and channels) that independent unit
         noise on every site leaves in the camera's image."""
-        return float(np.sqrt(np.mean([np.mean(np.sum(np.square(w), axis=1))
-                                      for _, w in self._forward_numpy])))
+        return float(np.sqrt(np.mean([P.multiply(P).sum() / P.shape[0] for P in self._weights])))
 
     def site_spp(self, spp: int) -> int:
         """Samples per (unboosted) site for ``spp`` samples per pixel: the same samples in all."""
