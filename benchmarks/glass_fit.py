@@ -3,8 +3,11 @@
 Each case renders a capture of the default scene's set-up (tablecloth, printed checkerboard,
 environment) with a glass object of known IOR and absorption, by **plain Mitsuba**: the stock
 ``dielectric`` (one IOR for all channels), a homogeneous absorbing medium inside it, ``envmap`` and
-the ``volpath`` integrator, never abs's own path tracer. Sensor noise is added, the last view is a
-holdout view. The scene file handed to the fit starts from IOR 1.5 (the last case: 1.75),
+the ``volpath`` integrator, never abs's own path tracer, at ``--photo-spp`` (4096) samples per
+pixel: a photograph has no Monte-Carlo noise, and at 512 the photographs' own noise in the glass's
+pixels (heavy-tailed) made the absorption's error four to five times what the sensor's noise
+makes it (measured over replicate photographs, ``docs/fitting.md``, Uncertainty). Sensor noise is
+added, the last view is a holdout view. The scene file handed to the fit starts from IOR 1.5 (the last case: 1.75),
 absorption 1/1/1 per metre and environment scale 1; ``abs.fit`` then fits ``glass.absorption``,
 ``glass.ior`` and ``environment.scale`` as the glass recipe does (``fitting/glass_absorption_ior.py``:
 short fits from several IORs choose the start, then ``SETTINGS``, IOR tied; the starts are
@@ -276,7 +279,7 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=120)
     parser.add_argument("--height", type=int, default=100)
     parser.add_argument("--views", type=int, default=5)
-    parser.add_argument("--photo-spp", type=int, default=512)
+    parser.add_argument("--photo-spp", type=int, default=4096)
     parser.add_argument("--work", type=Path, default=ROOT / "out/glass-fit")
     parser.add_argument("--results", type=Path, default=RESULTS)
     parser.add_argument("--single-start", action="store_true",

@@ -54,6 +54,18 @@ def test_bounds_and_trade_offs():
     assert any("trade off (correlation -0.995)" in c for c in checks)
 
 
+def test_trade_offs_are_judged_on_the_photographs_share():
+    # The renders' Monte-Carlo error can correlate scalars that the photographs separate well:
+    # the check reads the photographs' (Laplace) correlation when the fit gives it.
+    together = {"names": ["glass.absorption[0]", "glass.absorption[1]"],
+                "matrix": [[1.0, 0.995], [0.995, 1.0]]}
+    apart = {"names": together["names"], "matrix": [[1.0, 0.4], [0.4, 1.0]]}
+    summary = _summary(correlation=together, data_correlation=apart)
+    assert not any("trade off" in c for c in run_checks(summary, BOUNDS, KINDS))
+    summary = _summary(correlation=apart, data_correlation=together)
+    assert any("trade off (correlation +0.995)" in c for c in run_checks(summary, BOUNDS, KINDS))
+
+
 def test_without_holdout_views_the_training_residual_is_judged():
     summary = _summary(holdout_rmse={"before": None, "after": None},
                        train_rmse={"before": 0.3, "after": 0.2})

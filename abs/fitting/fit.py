@@ -73,6 +73,7 @@ class FitResult:
     starts: StartChoice | None = None
     monte_carlo_points: int = 0
     difference_steps: dict[str, DifferenceStep] | None = None
+    data_correlation: np.ndarray | None = None
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -89,12 +90,18 @@ class FitResult:
                 # radius, per component: near 1, the renders' noise moved it (checks.py).
                 entry["refinement_limited"] = [round(float(x), 4) for x in self.limited[name]]
             parameters[name] = entry
-        corr = np.where(np.isfinite(self.uncertainty.correlation), self.uncertainty.correlation, np.nan)
+        def table(corr: np.ndarray) -> dict:
+            return {"names": self.vector.labels(),
+                    "matrix": [[None if not np.isfinite(c) else round(float(c), 6) for c in row]
+                               for row in corr]}
+
         return {
             "parameters": parameters,
-            "correlation": {"names": self.vector.labels(),
-                            "matrix": [[None if not np.isfinite(c) else round(float(c), 6) for c in row]
-                                       for row in corr]},
+            "correlation": table(self.uncertainty.correlation),
+            # The photographs' share alone (the Laplace part): what they can and cannot tell
+            # apart, without the renders' Monte-Carlo error, which moves scalars together.
+            **({"data_correlation": table(self.data_correlation)}
+               if self.data_correlation is not None else {}),
             "pixel_sigma": self.uncertainty.pixel_sigma,
             **self.metrics,
             "renders": self.renders,
@@ -284,6 +291,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         uncertainty = laplace(r, J, prior, jacobian2=J2, more_pairs=more, curvatures=nearby,
                               residuals2=r2, correlation=correlation)
     monte_carlo_points = 0
+    photographs = uncertainty  # the photographs' part alone, before the renders' error is added
     if points is not None:
         physical = lambda zs: None if zs is None else np.array([vector.to_physical(p) for p in zs])  # noqa: E731
         uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter),
@@ -319,7 +327,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                        metrics, method, state.iteration, renders, samples,
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
                        scan=scans, limited=limited, starts=starts,
-                       monte_carlo_points=monte_carlo_points, difference_steps=steps)
+                       monte_carlo_points=monte_carlo_points, difference_steps=steps,
+                       data_correlation=photographs.correlation)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     # The scene's own geometry first: coincident surfaces make the renders themselves ambiguous.
