@@ -40,6 +40,7 @@ def test_fit_writes_the_contract_files(small_scene_dir, capture, tmp_path):
     assert summary["renders"] > 0 and summary["samples_rendered"] > 0 and summary["wall_s"] > 0
     assert summary["iterations"] >= 3 and summary["method"] == "lm"
     assert summary["correlation"]["names"] == ["environment.scale"]
+    assert summary["data_correlation"]["names"] == ["environment.scale"]
     fitted = load_scene(out / "scene.toml")  # loadable, assets re-rooted, value replaced
     assert fitted.environment.scale == pytest.approx(entry["value"][0])
     html = (out / "report" / "report.html").read_text()

@@ -173,7 +173,7 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
     # Monte-Carlo error moves the scalars together (an IOR's noisy steps carry every channel's
     # absorption with them), which the standard errors already hold and which says nothing of
     # what the photographs can tell apart (the glass suite's sphere-1.52 with 4096-spp
-    # photographs: absorption channels correlated +0.99 in all, each measured to 0.7 %).
+    # photographs: absorption channels correlated +0.99 in all, each measured to within 4 %).
     corr = summary.get("data_correlation") or summary.get("correlation") or {}
     labels, matrix = corr.get("names", []), corr.get("matrix", [])
     for i in range(len(labels)):

@@ -90,6 +90,7 @@ class FitResult:
                 # radius, per component: near 1, the renders' noise moved it (checks.py).
                 entry["refinement_limited"] = [round(float(x), 4) for x in self.limited[name]]
             parameters[name] = entry
+
         def table(corr: np.ndarray) -> dict:
             return {"names": self.vector.labels(),
                     "matrix": [[None if not np.isfinite(c) else round(float(c), 6) for c in row]
