@@ -73,7 +73,7 @@ class FitResult:
     starts: StartChoice | None = None
     monte_carlo_points: int = 0
     difference_steps: dict[str, DifferenceStep] | None = None
-    data_correlation: np.ndarray | None = None
+    data_correlation: np.ndarray | None = None  # (P, P), of the photographs' (Laplace) share alone
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
