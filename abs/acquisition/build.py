@@ -49,7 +49,7 @@ from abs.acquisition.raw import read_raw
 from abs.acquisition.undistort import (pinhole_K, superpixel_camera, undistort_image,
                                        undistort_mask)
 from abs.errors import InputError, read_json
-from abs.io.capture import Capture, SensorProcessing, save_capture
+from abs.io.capture import Capture, SensorProcessing, lens_blur_px, save_capture
 from abs.io.images import read_image, read_mask
 
 __all__ = ["build_capture", "load_frame"]
@@ -193,10 +193,10 @@ def build_capture(build_file: str | Path, out: str | Path,
         raise InputError(demosaic_source, demosaic_field, f"expected one of "
                                                           f"{', '.join(DEMOSAIC_METHODS)}, got "
                                                           f"{demosaic!r}")
-    lens_blur = spec.get("lens_blur_px", 0.0)
-    if isinstance(lens_blur, bool) or not isinstance(lens_blur, (int, float)) or not 0 <= lens_blur <= 10:
-        raise InputError(source, "lens_blur_px", f"expected a standard deviation in [0, 10] sensor "
-                                                 f"pixels, got {lens_blur!r}")
+    try:
+        lens_blur = lens_blur_px(spec.get("lens_blur_px", 0.0))
+    except ValueError as exc:
+        raise InputError(source, "lens_blur_px", str(exc)) from None
     superpixel = demosaic == "superpixel"
     views, images, masks, merges, blurs, blur_keys, processing = [], {}, {}, {}, {}, [], {}
     for i, entry in enumerate(spec["views"]):
@@ -236,7 +236,7 @@ def build_capture(build_file: str | Path, out: str | Path,
         blur_keys.append(key)
         processing[entry["name"]] = SensorProcessing(
             cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern,
-            float(lens_blur))
+            lens_blur)
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))

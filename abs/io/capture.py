@@ -57,7 +57,8 @@ from abs.errors import CaptureError, InputError, read_json
 from abs.io.images import (IMAGE_EXTENSIONS, image_size, read_image, read_mask, write_exr,
                            write_mask)
 
-__all__ = ["CAMERAS_FILE", "View", "Capture", "SensorProcessing", "load_capture", "save_capture"]
+__all__ = ["CAMERAS_FILE", "View", "Capture", "SensorProcessing", "load_capture", "save_capture",
+           "lens_blur_px"]
 
 CAMERAS_FILE = "cameras.json"
 ROTATION_TOL = 1e-5  # max |R^T R - I| and |det R - 1| accepted as a rotation
@@ -183,12 +184,21 @@ def _check_processing(value: Any, source: Path | None, field: str) -> "SensorPro
     if demosaic is not None and pattern not in _CFA:
         raise CaptureError(source, f"{field}.cfa_pattern", f"expected one of {', '.join(_CFA)} "
                                                            f"(demosaic {demosaic}), got {pattern!r}")
-    blur = value.get("lens_blur_px", 0.0)
-    if isinstance(blur, bool) or not isinstance(blur, (int, float)) or not 0 <= blur <= 10:
-        raise CaptureError(source, f"{field}.lens_blur_px", f"expected a standard deviation in "
-                                                            f"[0, 10] sensor pixels, got {blur!r}")
+    try:
+        blur = lens_blur_px(value.get("lens_blur_px", 0.0))
+    except ValueError as exc:
+        raise CaptureError(source, f"{field}.lens_blur_px", str(exc)) from None
     return SensorProcessing(size[0], size[1], _read_only(K), _read_only(distortion), demosaic,
-                            None if demosaic is None else pattern, float(blur))
+                            None if demosaic is None else pattern, blur)
+
+
+def lens_blur_px(value: Any) -> float:
+    """A lens blur's standard deviation (sensor pixels) as given in a file, checked: a number in
+    [0, 10]. The one rule for the capture's ``processing`` and the build file that writes it;
+    ``ValueError`` otherwise (callers name their file and field)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 <= value <= 10:
+        raise ValueError(f"expected a standard deviation in [0, 10] sensor pixels, got {value!r}")
+    return float(value)
 
 
 def _read_only(arr: np.ndarray) -> np.ndarray:
