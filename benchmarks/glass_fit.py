@@ -4,10 +4,10 @@ Each case renders a capture of the default scene's set-up (tablecloth, printed c
 environment) with a glass object of known IOR and absorption, by **plain Mitsuba**: the stock
 ``dielectric`` (one IOR for all channels), a homogeneous absorbing medium inside it, ``envmap`` and
 the ``volpath`` integrator, never abs's own path tracer, at ``--photo-spp`` (4096) samples per
-pixel: a photograph has no Monte-Carlo noise, and at 512 the photographs' own noise in the glass's
-pixels (heavy-tailed) made the absorption's error four to five times what the sensor's noise
-makes it (measured over replicate photographs, ``docs/fitting.md``, Uncertainty). Sensor noise is
-added, the last view is a holdout view. The scene file handed to the fit starts from IOR 1.5 (the last case: 1.75),
+pixel and :data:`PHOTO_GLASS_SPP_FACTOR` (16) times that where the glass is seen: a photograph has
+no Monte-Carlo noise, and a render's is heavy-tailed through glass (measured over replicate
+photographs, ``benchmarks/glass_photo_noise.py``, ``docs/fitting.md``, Uncertainty). Sensor noise
+is added, the last view is a holdout view. The scene file handed to the fit starts from IOR 1.5 (the last case: 1.75),
 absorption 1/1/1 per metre and environment scale 1; ``abs.fit`` then fits ``glass.absorption``,
 ``glass.ior`` and ``environment.scale`` as the glass recipe does (``fitting/glass_absorption_ior.py``:
 short fits from several IORs choose the start, then ``SETTINGS``, IOR tied; the starts are
@@ -139,10 +139,24 @@ def _scene_text(mesh: str, ior, absorption, scale: float) -> str:
     return text
 
 
-def mitsuba_photograph(compiled, camera, spp: int, seed: int) -> np.ndarray:
+#: The photographs take this many times their samples per pixel where the glass is seen (the
+#: rectangle of :func:`abs.model.observations.seen_rectangle`). A photograph has no Monte-Carlo
+#: noise, and a render's is worst through glass: at 4096 spp the distant bowl's photographs held
+#: 10-30 times the sensor's noise variance in the bowl's pixels, about its level elsewhere
+#: (``benchmarks/glass_photo_noise.py``), and the fit, which takes one noise level for all pixels,
+#: reported a quarter of the error that noise made.
+PHOTO_GLASS_SPP_FACTOR = 16
+
+
+def mitsuba_photograph(compiled, camera, spp: int, seed: int,
+                       glass_spp_factor: int = PHOTO_GLASS_SPP_FACTOR) -> np.ndarray:
     """Plain Mitsuba's rendering of a compiled abs scene from ``camera``: stock ``dielectric``
-    (the green IOR for every channel) with a homogeneous absorbing medium inside, ``volpath``."""
+    (the green IOR for every channel) with a homogeneous absorbing medium inside, ``volpath``;
+    the rectangle where glass is seen rendered again (a cropped film, its own seed) at
+    ``glass_spp_factor`` times ``spp`` and pasted in."""
     import mitsuba as mi
+
+    from abs.model.observations import seen_rectangle
 
     d = compiled.mitsuba_dict()
     glass = compiled.scene.materials["glass"]
@@ -160,12 +174,26 @@ def mitsuba_photograph(compiled, camera, spp: int, seed: int) -> np.ndarray:
     to_world = np.eye(4)
     to_world[:3, :3] = camera.R.T @ np.diag([-1.0, -1.0, 1.0])  # OpenCV camera axes -> Mitsuba's
     to_world[:3, 3] = camera.center
-    d["sensor"] = {"type": "perspective", "fov_axis": "y",
-                   "fov": float(np.degrees(2 * np.arctan(h / 2 / camera.K[1, 1]))),
-                   "to_world": mi.ScalarTransform4f(to_world),
-                   "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "tent"},
-                            "pixel_format": "rgb"}}
-    return np.array(mi.render(mi.load_dict(d, optimize=False), spp=spp, seed=seed), np.float32)
+
+    def render(crop: dict, samples: int, render_seed: int) -> np.ndarray:
+        d["sensor"] = {"type": "perspective", "fov_axis": "y",
+                       "fov": float(np.degrees(2 * np.arctan(h / 2 / camera.K[1, 1]))),
+                       "to_world": mi.ScalarTransform4f(to_world),
+                       "film": {"type": "hdrfilm", "width": w, "height": h,
+                                "rfilter": {"type": "tent"}, "pixel_format": "rgb", **crop}}
+        return np.array(mi.render(mi.load_dict(d, optimize=False), spp=samples, seed=render_seed),
+                        np.float32)
+
+    image = render({}, spp, seed)
+    rectangle = seen_rectangle(camera, compiled.transmissive_bounds()) if glass_spp_factor > 1 else None
+    if rectangle is not None:
+        x0, y0, x1, y1 = rectangle
+        # sample_border: the crop's edge pixels take their filter's samples from outside it too,
+        # as in the full image.
+        image[y0:y1, x0:x1] = render({"crop_offset_x": x0, "crop_offset_y": y0, "crop_width": x1 - x0,
+                                      "crop_height": y1 - y0, "sample_border": True},
+                                     spp * glass_spp_factor, seed + 7_919)
+    return image
 
 
 def _truth(case: Case) -> dict:
@@ -190,6 +218,7 @@ def run_case(case: Case, work: Path, args) -> dict:
     # The mesh's bytes key the cached capture too: an edited asset (the bowl lifted off the cloth)
     # renders a new one.
     shape = {"views": args.views, "width": args.width, "height": args.height, "photo_spp": args.photo_spp,
+             "photo_glass_spp_factor": PHOTO_GLASS_SPP_FACTOR,
              "mesh_sha256": hashlib.sha256((DEFAULT / case.mesh).read_bytes()).hexdigest(),
              **({"sensor_gain": SENSOR_GAIN} if case.sensor else {}),
              **({"lens_blur_px": SIMULATED_LENS_BLUR_PX} if case.psf_known else {})}
