@@ -2,12 +2,15 @@
 
 A fit's Laplace standard errors take one noise level for all pixels. Whether that is right for the
 glass suite's photographs (``benchmarks/glass_fit.py``: plain Mitsuba, sensor noise) is measured
-here directly: ``--replicates`` photographs of one case's views, differing only in their render
-and noise seeds, and for each the Gauss-Newton step from the truth under renders of ``--render-spp``
-samples (where the glass is seen, 4x; two independent renders for the image and the Jacobian's
-cross curvature, the IOR's column by central differences with ``--ior-step``). The steps' spread
-is the photographs' share of the estimate's error; their mean, a bias of abs's renderer against
-Mitsuba's at the truth; beside them, the homoscedastic Laplace part a fit would report
+here directly: ``--replicates`` photographs of one case's views (as the suite renders them, with
+``--photo-glass-spp-factor`` times the samples where the glass is seen), differing only in their
+render and noise seeds, and for each the Gauss-Newton step from the truth under renders of
+``--render-spp`` samples (where the glass is seen, 4x; two independent renders for the image and
+the Jacobian's cross curvature, the IOR's column by central differences with ``--ior-step``).
+The steps' spread is the photographs' share of the estimate's error. Their mean is a bias of
+abs's renderer against Mitsuba's at the truth plus one draw of the shared renders' noise, whose
+size ``render_se`` estimates (half the difference of the two render seeds' mean steps). Beside
+them, the homoscedastic Laplace part a fit would report
 (``sigma^2`` from two independent 64-spp renders' residuals, as ``abs.fit`` takes it).
 
     python benchmarks/glass_photo_noise.py --case sphere-1.52 --replicates 8 --photo-spp 4096
