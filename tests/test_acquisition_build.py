@@ -71,6 +71,13 @@ def test_build_writes_a_loadable_capture(tmp_path: Path):
     # The image written is the undistorted merge: constant red stays constant inside.
     red = view.read_image()[10:-10, 10:-10, 0]
     np.testing.assert_allclose(red, 2e4, rtol=2e-3)
+    # With it, its noise: shot noise of the 1700 DN that the four frames' red sums, read noise of
+    # 1 DN in each, over the 85 ms they sum: sqrt(1704) / 0.085 DN/s.
+    sd = view.read_noise()
+    np.testing.assert_allclose(sd[10:-10, 10:-10, 0], np.sqrt(1704.0) / 0.085, rtol=5e-3)
+    # Blue's bright rows use the short frames only: noisier in DN/s, less noisy relative to it.
+    blue, blue_sd = view.read_image()[..., 2], sd[..., 2]
+    assert blue_sd[8, 32] > blue_sd[40, 32] and blue_sd[8, 32] / blue[8, 32] < blue_sd[40, 32] / blue[40, 32]
     # How each photograph was made, for fits to render exactly (abs.acquisition.footprint).
     processing = view.processing
     assert (processing.width, processing.height, processing.demosaic, processing.cfa_pattern,

@@ -76,6 +76,28 @@ def test_merge_recovers_linear_truth_within_noise():
     assert not merged.used[-1][bright] and merged.used[0][bright]
 
 
+def test_merge_variance_is_the_scatter_of_repeated_merges():
+    # 300 brackets of the same pixels (4.6 decades of radiance, shot noise at one electron per
+    # data number and 2 DN of read noise): the merge's stated variance is their scatter.
+    rng = np.random.default_rng(4)
+    radiance = np.exp(np.linspace(np.log(50), np.log(2e6), 40))
+    t = 0.001 * 4.0 ** np.arange(6)
+    darks = [np.full(radiance.shape, 64.0)] * len(t)
+    merges = [merge_brackets([_sensor(radiance, ti, rng) for ti in t], t, 4095.0, darks,
+                             read_noise_dn=2.0) for _ in range(300)]
+    scatter = np.var([m.radiance for m in merges], axis=0, ddof=1)
+    stated = np.mean([m.variance for m in merges], axis=0)
+    ratio = scatter / stated
+    # 300 draws: a variance's ratio scatters by sqrt(2/299) = 8 %; rounding to whole DN adds
+    # 1/12 DN^2 to the read noise's 4.
+    assert np.all(np.abs(ratio - 1) < 0.3), ratio
+    assert abs(np.mean(ratio) - 1) < 0.05, np.mean(ratio)
+    # Relative noise falls with light up to the frames' saturation, then stays (the bracket
+    # keeps each pixel near full well): equal weights would let the brightest pixels dominate.
+    relative = np.sqrt(stated) / radiance
+    assert relative[0] > 4 * relative[-1] and relative[-1] < 0.03
+
+
 def test_merge_without_exclusion_would_be_biased():
     rng = np.random.default_rng(1)
     radiance = np.full((8, 8), 1e5)

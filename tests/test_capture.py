@@ -77,6 +77,34 @@ def test_roundtrip(capture_dir):
     np.testing.assert_array_equal(copy.view("v1").read_image(), images["v1"])
 
 
+def test_noise_images_round_trip_and_are_checked(tmp_path):
+    images = _images()
+    sd = {"v0": 0.01 + 0.02 * images["v0"]}  # shot-noise-like: grows with the light
+    cap = save_capture(tmp_path / "cap", _views(), images, noise=sd)
+    assert cap.view("v1").noise is None and cap.view("v1").read_noise() is None
+    np.testing.assert_allclose(cap.view("v0").read_noise(), sd["v0"], rtol=1e-6)
+    assert json.loads((tmp_path / "cap" / "cameras.json").read_text())["noise"] == {"v0": "v0_noise.exr"}
+    # Copied from its View objects, a capture keeps them.
+    copy = save_capture(tmp_path / "copy", cap.views)
+    np.testing.assert_allclose(copy.view("v0").read_noise(), sd["v0"], rtol=1e-6)
+    # A file naming an unknown view, a noise image of another size, a value not positive.
+    folder = tmp_path / "cap"
+    _edit(folder, lambda d: d["noise"].update(v9="v0_noise.exr"))
+    _expect_error(folder, "noise.v9")
+    _edit(folder, lambda d: d.update(noise={"v0": "v1.exr", "v1": "missing.exr"}))
+    _expect_error(folder, "noise.v1")
+    with pytest.raises(CaptureError) as err:
+        save_capture(tmp_path / "bad", _views(), images, noise={"v0": -sd["v0"]})
+    assert err.value.field == "noise['v0']" and "positive" in str(err.value)
+    with pytest.raises(CaptureError, match="differs"):
+        save_capture(tmp_path / "bad", _views(), images, noise={"v0": sd["v0"][:2]})
+    from abs.io.images import write_exr
+    write_exr(folder / "v0_noise.exr", np.zeros((H, W, 3), np.float32))
+    _edit(folder, lambda d: d.update(noise={"v0": "v0_noise.exr"}))
+    with pytest.raises(CaptureError, match="v0_noise.exr.*not finite and positive"):
+        load_capture(folder).view("v0").read_noise()
+
+
 def test_views_are_immutable(capture_dir):
     v = load_capture(capture_dir).view("v0")
     with pytest.raises(Exception):

@@ -29,6 +29,9 @@ method, the CFA pattern and the lens blur, so that fits render each built pixel 
 sensor sites it was made from (:mod:`abs.acquisition.footprint`). Its ``blur_px`` is the blur that
 this demosaicing and undistortion add (:func:`abs.acquisition.blur.processing_blur`, its variance
 averaged over the views): what readers that ignore ``processing`` blur their renderings by.
+Its ``noise`` (views of raw frames only) is each merged photograph's shot and read noise
+(:attr:`abs.acquisition.hdr.MergedHDR.variance`) undistorted with it: fits weigh pixels by it,
+so that bright glints, whose noise grows with their light, do not outweigh the rest.
 """
 
 from __future__ import annotations
@@ -55,6 +58,8 @@ from abs.io.images import read_image, read_mask
 __all__ = ["build_capture", "load_frame"]
 
 _VIEW_KEYS = {"name", "camera", "frames", "exposures_s", "darks", "holdout", "mask"}
+# (Data numbers per second)^2: a floor on the noise written, which must be positive.
+_MIN_VARIANCE = 1e-12
 
 
 def load_frame(path: Path, cfa_pattern: str | None, saturation: float = 0.95,
@@ -199,6 +204,7 @@ def build_capture(build_file: str | Path, out: str | Path,
         raise InputError(source, "lens_blur_px", str(exc)) from None
     superpixel = demosaic == "superpixel"
     views, images, masks, merges, blurs, blur_keys, processing = [], {}, {}, {}, {}, [], {}
+    noise = {}
     for i, entry in enumerate(spec["views"]):
         field = f"views[{i}]"
         if not isinstance(entry, dict):
@@ -238,6 +244,14 @@ def build_capture(build_file: str | Path, out: str | Path,
             cam.width, cam.height, cam.K, cam.distortion, demosaic if raw else None, pattern,
             lens_blur)
         images[entry["name"]] = undistort_image(merged.radiance, cam_img, K_new)
+        if raw:
+            # The merge's shot and read noise, resampled as the image is (a local mean of the
+            # variances its pixels are made from: what weighs pixels against each other; the
+            # spreading of each site's noise to its neighbours is the footprint's correlation).
+            # Pixels that sample outside the frame (none at the build's zoom) weigh least.
+            variance = undistort_image(merged.variance, cam_img, K_new).astype(np.float64)
+            variance = np.where(variance > 0, variance, max(float(variance.max()), _MIN_VARIANCE))
+            noise[entry["name"]] = np.sqrt(np.maximum(variance, _MIN_VARIANCE))
         if entry.get("mask") is not None:
             mask = read_mask(folder / entry["mask"], (cam.height, cam.width))
             if superpixel:
@@ -252,4 +266,4 @@ def build_capture(build_file: str | Path, out: str | Path,
     blur_px = (np.sqrt(np.mean([np.square(blurs[k]) for k in blur_keys], axis=0)) if blur_keys
                else np.zeros(3))
     return save_capture(out, views, images, masks or None, blur_px=blur_px,
-                        processing=processing), merges
+                        processing=processing, noise=noise), merges

@@ -35,12 +35,19 @@ class MergedHDR:
     saturated_everywhere : np.ndarray
         Pixels saturated even in the shortest exposure (their value is a lower bound, taken
         from the shortest exposure).
+    variance : np.ndarray
+        The radiance's noise variance, (data numbers per second)^2, float32: the frames' shot
+        noise at one electron per data number plus their read noise (``read_noise_dn``), carried
+        through the merge. A camera's gain (electrons per data number) scales the shot term,
+        so the values are right up to about one factor per camera: enough to weigh pixels
+        against each other (``noise`` of a capture, :mod:`abs.io.capture`).
     """
 
     radiance: np.ndarray
     weight: np.ndarray
     used: np.ndarray
     saturated_everywhere: np.ndarray
+    variance: np.ndarray
 
 
 def check_exposures(exposures_s: Sequence[float], source: str | None = None) -> np.ndarray:
@@ -62,7 +69,7 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
                    white_level: float, darks: Sequence[np.ndarray] | None = None,
                    saturation: float = 0.95, dark_floor: float = 2.0,
                    saturated: Sequence[np.ndarray] | None = None,
-                   source: str | None = None) -> MergedHDR:
+                   source: str | None = None, read_noise_dn: float = 1.0) -> MergedHDR:
     """Merge linear frames of one scene taken at increasing exposure times.
 
     Parameters
@@ -85,6 +92,9 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
         demosaiced pixels interpolated from a clipped mosaic site, see :mod:`.build`).
     source : str, optional
         Where the bracket came from, for error messages.
+    read_noise_dn : float
+        The frames' read noise (standard deviation, data numbers), for
+        :attr:`MergedHDR.variance` only.
     """
     t = check_exposures(exposures_s, source)
     if len(frames) != t.size:
@@ -128,4 +138,15 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
     radiance = np.where(saturated_all, signal[0] / t[0], radiance)
     radiance = np.where(dark_all, np.sum(np.where(saturated, 0.0, signal), axis=0) / t.sum(),
                         radiance)
-    return MergedHDR(radiance.astype(np.float32), weight.astype(np.float32), used, saturated_all)
+    # Shot noise (variance = counts) and read noise of the frames summed, over the squared total
+    # exposure: the variance of ``total / weight`` (and of the two fallbacks' own sums).
+    read = float(read_noise_dn) ** 2
+    counts = np.maximum(signal, 0.0)
+    variance = (np.sum(np.where(used, counts + read, 0.0), axis=0)
+                / np.where(weight > 0, weight, 1.0) ** 2)
+    variance = np.where(saturated_all, (counts[0] + read) / t[0] ** 2, variance)
+    unsaturated = ~saturated
+    variance = np.where(dark_all, np.sum(np.where(unsaturated, counts + read, 0.0), axis=0)
+                        / t.sum() ** 2, variance)
+    return MergedHDR(radiance.astype(np.float32), weight.astype(np.float32), used, saturated_all,
+                     np.maximum(variance, read / t.sum() ** 2).astype(np.float32))

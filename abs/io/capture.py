@@ -9,7 +9,8 @@ A capture folder holds ``cameras.json`` next to the photographs::
      "blur_px": [0.8, 0.65, 0.8],
      "processing": {"v0": {"width": 1280, "height": 1024, "K": [[...], [...], [...]],
                            "distortion": [k1, k2, p1, p2, k3], "demosaic": "bilinear",
-                           "cfa_pattern": "RGGB"}}}
+                           "cfa_pattern": "RGGB"}},
+     "noise": {"v0": "v0_noise.exr"}}
 
 - ``name``: unique, usable as a file name (letters, digits, ``_``, ``-``, ``.``; not starting
   with ``.`` or ``-``; at most 128 characters).
@@ -34,6 +35,15 @@ A capture folder holds ``cameras.json`` next to the photographs::
   it, renderings of the view average exactly the sensor sites each built pixel averages
   (:mod:`abs.acquisition.footprint`) instead of being blurred by ``blur_px``. Readers that ignore
   it use ``blur_px``.
+- ``noise`` (optional, top level): per view name, an image file (EXR, the photograph's size, 3
+  channels) of the standard deviation of the photograph's noise per pixel and channel, in the
+  photograph's units **up to one factor common to the capture**: fits weigh each residual by
+  the inverse of it (relative to its median), and estimate the noise's level from the residuals
+  as without it. ``abs capture build`` writes the shot and read noise of its merged brackets
+  (docs/acquisition.md): in a photograph merged from brackets the noise grows with the light,
+  and a few bright glints would otherwise outweigh the rest of the image (docs/fitting.md,
+  Pixel weights). Values must be finite and positive. Readers that ignore it weigh all pixels
+  alike, as before.
 
 Keys of a view starting with ``_`` are comments and ignored; other unknown keys are errors, so a
 typo such as ``holdOut`` cannot silently change meaning. Unknown top-level keys are ignored.
@@ -288,6 +298,9 @@ class View:
     processing : SensorProcessing or None
         How a capture build made the photograph from the sensor (``processing[name]``), or
         ``None``.
+    noise : Path or None
+        Absolute path of the photograph's noise image (``noise[name]``: standard deviation per
+        pixel and channel, up to a factor common to the capture), or ``None``.
     """
 
     name: str
@@ -301,6 +314,7 @@ class View:
     mask: Path | None = None
     blur_px: tuple[float, float, float] = (0.0, 0.0, 0.0)
     processing: SensorProcessing | None = None
+    noise: Path | None = None
 
     def __post_init__(self) -> None:
         where = f"View({self.name!r})"
@@ -312,6 +326,8 @@ class View:
         object.__setattr__(self, "t", _read_only(_check_t(self.t, None, f"{where}.t")))
         if self.mask is not None:
             object.__setattr__(self, "mask", Path(self.mask))
+        if self.noise is not None:
+            object.__setattr__(self, "noise", Path(self.noise))
         if int(self.width) <= 0 or int(self.height) <= 0:
             raise CaptureError(None, f"{where}.size", f"invalid size {self.width}x{self.height}")
 
@@ -329,6 +345,29 @@ class View:
         if self.mask is None:
             return np.ones((self.height, self.width), dtype=bool)
         return read_mask(self.mask, (self.height, self.width))
+
+    def read_noise(self) -> np.ndarray | None:
+        """The photograph's noise standard deviation as ``(height, width, 3)`` ``float64`` (up
+        to a factor common to the capture), or ``None`` when the view has none.
+
+        Raises
+        ------
+        CaptureError
+            Naming the file, when its size differs from the photograph's or a value is not
+            finite and positive.
+        """
+        if self.noise is None:
+            return None
+        sd = np.asarray(read_image(self.noise), np.float64)
+        field = f"noise.{self.name}"
+        if sd.shape != (self.height, self.width, 3):
+            raise CaptureError(self.noise, field, f"noise image is {sd.shape[1]}x{sd.shape[0]} "
+                                                  f"pixels, photograph {self.width}x{self.height}")
+        bad = int(np.count_nonzero(~(np.isfinite(sd) & (sd > 0))))
+        if bad:
+            raise CaptureError(self.noise, field, f"{bad} values are not finite and positive (a "
+                                                  "standard deviation per pixel and channel)")
+        return sd
 
 
 @dataclass(frozen=True, eq=False)
@@ -487,6 +526,24 @@ def load_capture(folder: str | Path) -> Capture:
                                    f"a {view.width}x{view.height} photograph cannot come from the "
                                    f"{p.width}x{p.height} sensor by demosaic {p.demosaic} (was the "
                                    "photograph resized after the build?)")
+    noise = data.get("noise")
+    if noise is not None:
+        if not isinstance(noise, dict):
+            raise CaptureError(source, "noise", f"expected an object of view names, got "
+                                                f"{type(noise).__name__}")
+        sizes = {view.name: (view.width, view.height) for view in parsed}
+        paths = {}
+        for name, value in noise.items():
+            if name not in seen:
+                raise CaptureError(source, f"noise.{name}", "no view has this name")
+            path = _resolve(folder, value, source, f"noise.{name}")
+            size = _image_size(path, source, f"noise.{name}", (".exr",))
+            if size != sizes[name]:
+                raise CaptureError(source, f"noise.{name}", f"noise image is {size[0]}x{size[1]} "
+                                                           f"pixels, photograph "
+                                                           f"{sizes[name][0]}x{sizes[name][1]}")
+            paths[name] = path.absolute()
+        parsed = [replace(view, noise=paths.get(view.name)) for view in parsed]
     return Capture(folder=folder, views=tuple(parsed))
 
 
@@ -523,9 +580,11 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                  images: Mapping[str, np.ndarray] | None = None,
                  masks: Mapping[str, np.ndarray] | None = None,
                  blur_px: Sequence[float] | None = None,
-                 processing: Mapping[str, SensorProcessing] | None = None) -> Capture:
-    """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks and
-    ``cameras.json`` (written last, atomically), then load it back.
+                 processing: Mapping[str, SensorProcessing] | None = None,
+                 noise: Mapping[str, np.ndarray] | None = None) -> Capture:
+    """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks,
+    ``<name>_noise.exr`` noise images and ``cameras.json`` (written last, atomically), then load
+    it back.
 
     Parameters
     ----------
@@ -546,6 +605,10 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     processing : mapping of str to SensorProcessing, optional
         How the photographs were made from the sensor, per view name (top-level
         ``processing``). Default: that of the :class:`View` items that have one.
+    noise : mapping of str to np.ndarray, optional
+        The photographs' noise standard deviation, ``(height, width, 3)``, per view name
+        (top-level ``noise``; up to a factor common to the capture). A :class:`View` missing
+        here keeps its existing noise image, if any.
 
     Returns
     -------
@@ -561,6 +624,7 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     folder = Path(folder).absolute()
     images = dict(images or {})
     masks = dict(masks or {})
+    noise = dict(noise or {})
     if not views:
         raise CaptureError(None, "views", "expected at least one view")
     if blur_px is None:
@@ -630,22 +694,40 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                 raise CaptureError(None, f"masks[{name!r}]", "mask is all zero")
         elif isinstance(item, View) and item.mask is not None:
             mask = item.read_mask()
-        prepared.append((spec, rgb, mask))
-    for what, given in (("images", images), ("masks", masks), ("processing", processing)):
+
+        sd = None
+        if name in noise:
+            sd = np.asarray(noise[name], np.float64)
+            if sd.shape != rgb.shape:
+                raise CaptureError(None, f"noise[{name!r}]", f"shape {sd.shape} differs from the "
+                                                             f"photograph's {rgb.shape}")
+            bad = int(np.count_nonzero(~(np.isfinite(sd) & (sd > 0))))
+            if bad:
+                raise CaptureError(None, f"noise[{name!r}]", f"{bad} values are not finite and "
+                                                             "positive")
+        elif isinstance(item, View) and item.noise is not None:
+            sd = item.read_noise()
+        prepared.append((spec, rgb, mask, sd))
+    for what, given in (("images", images), ("masks", masks), ("processing", processing),
+                        ("noise", noise)):
         if unused := sorted(set(given) - seen):
             raise CaptureError(None, f"{what}[{unused[0]!r}]", "no view has this name")
 
     folder.mkdir(parents=True, exist_ok=True)
     saved: list[View] = []
-    for spec, rgb, mask in prepared:
+    for spec, rgb, mask, sd in prepared:
         image_path = folder / f"{spec['name']}.exr"
         write_exr(image_path, rgb)
-        mask_path = None
+        mask_path = noise_path = None
         if mask is not None:
             mask_path = folder / f"{spec['name']}_mask.png"
             write_mask(mask_path, mask)
+        if sd is not None:
+            noise_path = folder / f"{spec['name']}_noise.exr"
+            write_exr(noise_path, sd)
         saved.append(View(image=image_path, width=rgb.shape[1], height=rgb.shape[0],
-                          mask=mask_path, processing=processing.get(spec["name"]), **spec))
+                          mask=mask_path, processing=processing.get(spec["name"]),
+                          noise=noise_path, **spec))
 
     text = '{\n  "views": [\n' + ",\n".join(_json_view(v, folder) for v in saved) + "\n  ]"
     if any(blur_px):
@@ -655,6 +737,10 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
         entries = ",\n".join(f"    {json.dumps(name)}: {json.dumps(p.to_json())}"
                              for name, p in processing.items())
         text += ',\n  "processing": {\n' + entries + "\n  }"
+    if any(v.noise is not None for v in saved):
+        entries = ",\n".join(f"    {json.dumps(v.name)}: {json.dumps(v.noise.name)}"
+                              for v in saved if v.noise is not None)
+        text += ',\n  "noise": {\n' + entries + "\n  }"
     text += "\n}\n"
     tmp = folder / f".{CAMERAS_FILE}.tmp"
     tmp.write_text(text, encoding="utf-8")

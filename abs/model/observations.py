@@ -16,7 +16,7 @@ import numpy as np
 from abs.model.downsampling import downsample, downsample_camera, downsample_mask
 from abs.render.camera import Camera, SampleBoost
 
-__all__ = ["Observation", "observe", "boost_where_seen", "seen_rectangle"]
+__all__ = ["Observation", "observe", "boost_where_seen", "seen_rectangle", "pixel_weights"]
 
 #: Pixels added around a boosted rectangle: a pixel's filter reaches its neighbours.
 BOOST_MARGIN_PX = 2
@@ -38,6 +38,9 @@ class Observation:
         Linear RGB (relative radiance, unitless).
     mask : ndarray of bool, shape (H, W)
         Compared pixels.
+    noise_sd : ndarray, shape (H, W, 3), or None
+        The photograph's noise standard deviation per pixel and channel, up to a factor common
+        to the capture (the capture's ``noise``), or ``None`` (pixels weigh alike).
     """
 
     name: str
@@ -45,6 +48,7 @@ class Observation:
     camera: Camera
     photograph: np.ndarray
     mask: np.ndarray
+    noise_sd: np.ndarray | None = None
 
     @property
     def pixels(self) -> int:
@@ -68,8 +72,31 @@ def observe(view, factor: int = 1) -> Observation:
     photo = view.read_image().astype(np.float64)
     mask = view.read_mask()
     camera = Camera.from_view(view)
+    sd = view.read_noise()
+    if sd is not None:
+        # The noise of a block's mean (independent pixels; only ratios matter).
+        sd = np.sqrt(downsample(np.square(sd), factor)) / factor
     return Observation(view.name, bool(view.holdout), downsample_camera(camera, factor),
-                       downsample(photo, factor), downsample_mask(mask, factor))
+                       downsample(photo, factor), downsample_mask(mask, factor), sd)
+
+
+def pixel_weights(observations) -> list[np.ndarray] | None:
+    """Weights of each observation's residuals, ``(H, W, 3)``: the inverse of the photograph's
+    noise standard deviation, relative to its median over every compared pixel and channel of
+    ``observations`` (so that a weighted residual is in the photograph's units at a typical
+    pixel, and noise estimates from the photographs still apply to it). ``None`` unless every
+    observation has a noise image (a capture's ``noise``): weights on some views only would set
+    those views' scale against the others' arbitrarily.
+
+    Weighted least squares is the maximum-likelihood fit when the noise differs between pixels:
+    in a photograph merged from brackets the noise grows with the light, and a bright glint's
+    pixels, left at equal weight, outweigh the rest of the image (docs/fitting.md, Pixel
+    weights).
+    """
+    if not observations or any(o.noise_sd is None for o in observations):
+        return None
+    reference = float(np.median(np.concatenate([o.noise_sd[o.mask].ravel() for o in observations])))
+    return [np.where(o.mask[..., None], reference / o.noise_sd, 0.0) for o in observations]
 
 
 def seen_rectangle(camera: Camera, bounds) -> tuple[int, int, int, int] | None:

@@ -7,7 +7,9 @@ posterior or the diagnosis built on it.
 
 :class:`FitProblem` owns a compiled scene, the compared views and the parameter layout. Its
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
-pixel and channel (linear RGB). Derivatives come from Dr.Jit, never from finite differences:
+pixel and channel (linear RGB), times the pixel's weight when the capture gives the photographs'
+noise (:func:`abs.model.observations.pixel_weights`: the inverse noise relative to its median;
+otherwise 1). Derivatives come from Dr.Jit, never from finite differences:
 
 - :meth:`FitProblem.residuals` with ``jacobian=True`` renders forward-mode derivatives
   (:meth:`CompiledScene.render_forward`: tangents carried inside the path loop, about 1.6 primal
@@ -42,7 +44,7 @@ import drjit as dr
 import numpy as np
 
 from abs.model.counter import RenderCounter
-from abs.model.observations import Observation
+from abs.model.observations import Observation, pixel_weights
 from abs.model.parameters import ParameterVector
 from abs.render.compiled import CompiledScene
 from abs.render.path_lengths import MAX_MATERIALS
@@ -92,6 +94,22 @@ class FitProblem:
     counter: RenderCounter = field(default_factory=RenderCounter)
     reweight: bool = True
     _recordings: OrderedDict = field(default_factory=OrderedDict, repr=False)
+    _weights: list | None = field(init=False, default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        self._weights = pixel_weights(self.observations)
+
+    @property
+    def weights(self) -> list[np.ndarray] | None:
+        """Per observation, the ``(H, W, 3)`` weights of its residuals (0 outside the mask), or
+        ``None`` when pixels weigh alike (:func:`~abs.model.observations.pixel_weights`)."""
+        return self._weights
+
+    def _row_weights(self, k: int) -> np.ndarray | None:
+        """Observation ``k``'s weights in residual order (masked pixels, channels), or None."""
+        if self._weights is None:
+            return None
+        return self._weights[k][self.observations[k].mask].ravel()
 
     @property
     def n_residuals(self) -> int:
@@ -210,11 +228,15 @@ class FitProblem:
             return image, np.ones_like(image, bool)
         return np.minimum(image, self.clamp), image < self.clamp
 
-    def _compare(self, observation: Observation, image: np.ndarray):
-        """Residuals of one view and the mask of residuals that carry derivatives."""
+    def _compare(self, k: int, image: np.ndarray):
+        """Residuals of observation ``k`` (weighted) and the mask of residuals that carry
+        derivatives, times the weights: what the Jacobian's rows are multiplied by."""
+        observation = self.observations[k]
         clamped, live = self._clamp(image)
         m = observation.mask
-        return (clamped - observation.photograph)[m].ravel(), live[m].ravel()
+        r, live = (clamped - observation.photograph)[m].ravel(), live[m].ravel().astype(np.float64)
+        w = self._row_weights(k)
+        return (r, live) if w is None else (r * w, live * w)
 
     def residuals(self, theta: np.ndarray, spp: int, seed: int, jacobian: bool = False,
                   jacobian_seed: int | None = None, names=None):
@@ -236,7 +258,7 @@ class FitProblem:
         for k, obs in enumerate(self.observations):
             view_seed = _view_seed(seed, k)
             if not jacobian:
-                r, _ = self._compare(obs, self.render(obs, theta, spp, view_seed))
+                r, _ = self._compare(k, self.render(obs, theta, spp, view_seed))
                 rs.append(r)
                 continue
             image, jac = self._render_with_jacobian(
@@ -244,7 +266,7 @@ class FitProblem:
                 names)
             if jacobian_seed is not None and jacobian_seed != seed:
                 image = self.render(obs, theta, spp, view_seed)
-            r, live = self._compare(obs, image)
+            r, live = self._compare(k, image)
             rs.append(r)
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(rs), (np.concatenate(js) if jacobian else None)
@@ -261,7 +283,7 @@ class FitProblem:
         js = []
         for k, obs in enumerate(self.observations):
             image, jac = self._render_with_jacobian(obs, theta, spp, _view_seed(seed, k), names)
-            live = self._clamp(image)[1][obs.mask].ravel()
+            live = self._compare(k, image)[1]
             js.append(jac[obs.mask].reshape(-1, self.vector.size) * live[:, None])
         return np.concatenate(js)
 
@@ -351,10 +373,12 @@ class FitProblem:
         for k, obs in enumerate(self.observations):
             cam = obs.camera
             image = self.render(obs, theta, spp, _view_seed(seed, k))
-            r, _ = self._compare(obs, image)
+            r, _ = self._compare(k, image)
             total += 0.5 * float(r @ r)
             clamped, live = self._clamp(image)
             residual = (clamped - obs.photograph) * (obs.mask[..., None] & live)
+            if self._weights is not None:  # d/dtheta of (w r)^2 / 2 is w^2 r dr/dtheta
+                residual = residual * np.square(self._weights[k])
             view_seed = _view_seed(jacobian_seed, k)
             if replayed:
                 _, g = self.compiled.render_backward(cam, residual, replayed, spp=spp, seed=view_seed,

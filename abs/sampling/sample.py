@@ -295,7 +295,8 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
     """The noise model at the fit ``theta``.
 
     Render variance per pixel: the sample variance of ``n_renders`` independent renders
-    (smoothed).
+    (smoothed; times the squared pixel weights when the capture gives the photographs' noise,
+    :attr:`~abs.model.FitProblem.weights`, as the residuals are).
     Photograph variance per view: from the residuals ``rbar`` of the average of two more
     renders, each ``rbar^2 - var_render / 2`` is an unbiased estimate of it (sensor noise plus any
     model error the fit cannot remove); their weighted mean, weights ``1 / (var_photo +
@@ -309,8 +310,10 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
     dof = r_bar.size / max(r_bar.size - theta.size, 1)
     photo, renders, immerkaer, offset = [], [], [], 0
     for k, obs in enumerate(problem.observations):
-        renders.append(render_variance([problem.render(obs, theta, spp, seed + 2 + n_renders * k + i)
-                                        for i in range(n_renders)]))
+        variance = render_variance([problem.render(obs, theta, spp, seed + 2 + n_renders * k + i)
+                                    for i in range(n_renders)])
+        # In the residuals' units: weighted when the capture gives the photographs' noise.
+        renders.append(variance if problem.weights is None else variance * np.square(problem.weights[k]))
         immerkaer.append(estimate_image_noise(obs.photograph, obs.camera))
         n = 3 * obs.pixels
         half_render = renders[-1][obs.mask].ravel() / 2
