@@ -81,22 +81,31 @@ def observe(view, factor: int = 1) -> Observation:
 
 
 def pixel_weights(observations) -> list[np.ndarray] | None:
-    """Weights of each observation's residuals, ``(H, W, 3)``: the inverse of the photograph's
-    noise standard deviation, relative to its median over every compared pixel and channel of
-    ``observations`` (so that a weighted residual is in the photograph's units at a typical
-    pixel, and noise estimates from the photographs still apply to it). ``None`` unless every
-    observation has a noise image (a capture's ``noise``): weights on some views only would set
-    those views' scale against the others' arbitrarily.
+    """Weights of each observation's residuals, ``(H, W, 3)`` (0 outside the mask):
+    ``sqrt(2) s / sqrt(sd^2 + s^2)``, ``sd`` the photograph's noise standard deviation of that
+    pixel and channel and ``s`` its median over every compared pixel and channel of
+    ``observations``. ``None`` unless every observation has a noise image (a capture's
+    ``noise``): weights on some views only would set those views' scale against the others'
+    arbitrarily.
 
     Weighted least squares is the maximum-likelihood fit when the noise differs between pixels:
     in a photograph merged from brackets the noise grows with the light, and a bright glint's
     pixels, left at equal weight, outweigh the rest of the image (docs/fitting.md, Pixel
-    weights).
+    weights). The noise image holds the photograph's noise only; the residuals also hold the
+    renders' Monte-Carlo noise (at a fit's samples per pixel about the photograph's typical
+    noise, or more) and whatever the model gets wrong, neither of which falls with the light.
+    So each pixel's variance is taken as its own plus the median one, ``s^2``: the noisiest
+    pixels count for little, the quietest at most twice the median one's (measured, the glass
+    suite's raw-built sphere and the acquisition benchmark's builds: without that floor, dark
+    pixels took over fits whose model is approximate). A typical pixel weighs 1, so that a
+    weighted residual is in the photograph's units and noise estimates from the photographs
+    still apply to it.
     """
     if not observations or any(o.noise_sd is None for o in observations):
         return None
     reference = float(np.median(np.concatenate([o.noise_sd[o.mask].ravel() for o in observations])))
-    return [np.where(o.mask[..., None], reference / o.noise_sd, 0.0) for o in observations]
+    return [np.where(o.mask[..., None], np.sqrt(2.0) * reference / np.hypot(o.noise_sd, reference), 0.0)
+            for o in observations]
 
 
 def seen_rectangle(camera: Camera, bounds) -> tuple[int, int, int, int] | None:
