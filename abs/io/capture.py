@@ -38,8 +38,8 @@ A capture folder holds ``cameras.json`` next to the photographs::
 - ``noise`` (optional, top level): per view name, an image file (EXR, the photograph's size, 3
   channels) of the standard deviation of the photograph's noise per pixel and channel, in the
   photograph's units **up to one factor common to the capture**: fits weigh each residual by
-  the inverse of it (relative to its median), and estimate the noise's level from the residuals
-  as without it. ``abs capture build`` writes the shot and read noise of its merged brackets
+  it (the noisier a pixel, the less it counts: docs/fitting.md, Pixel weights), and estimate the
+  noise's level from the residuals as without it. ``abs capture build`` writes the shot and read noise of its merged brackets
   (docs/acquisition.md): in a photograph merged from brackets the noise grows with the light,
   and a few bright glints would otherwise outweigh the rest of the image (docs/fitting.md,
   Pixel weights). Values must be finite and positive. Readers that ignore it weigh all pixels
