@@ -39,11 +39,11 @@ A capture folder holds ``cameras.json`` next to the photographs::
   channels) of the standard deviation of the photograph's noise per pixel and channel, in the
   photograph's units **up to one factor common to the capture**: fits weigh each residual by
   it (the noisier a pixel, the less it counts: docs/fitting.md, Pixel weights), and estimate the
-  noise's level from the residuals as without it. ``abs capture build`` writes the shot and read noise of its merged brackets
-  (docs/acquisition.md): in a photograph merged from brackets the noise grows with the light,
-  and a few bright glints would otherwise outweigh the rest of the image (docs/fitting.md,
-  Pixel weights). Values must be finite and positive. Readers that ignore it weigh all pixels
-  alike, as before.
+  noise's level from the residuals as without it. ``abs capture build`` writes the shot and
+  read noise of its merged brackets (docs/acquisition.md): in a photograph merged from brackets
+  the noise grows with the light, and a few bright glints would otherwise outweigh the rest of
+  the image. Values must be finite and positive. Readers that ignore it weigh all pixels alike,
+  as before.
 
 Keys of a view starting with ``_`` are comments and ignored; other unknown keys are errors, so a
 typo such as ``holdOut`` cannot silently change meaning. Unknown top-level keys are ignored.

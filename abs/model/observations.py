@@ -104,7 +104,8 @@ def pixel_weights(observations) -> list[np.ndarray] | None:
     if not observations or any(o.noise_sd is None for o in observations):
         return None
     reference = float(np.median(np.concatenate([o.noise_sd[o.mask].ravel() for o in observations])))
-    return [np.where(o.mask[..., None], np.sqrt(2.0) * reference / np.hypot(o.noise_sd, reference), 0.0)
+    return [np.where(o.mask[..., None],
+                     np.sqrt(2.0) * reference / np.hypot(o.noise_sd, reference), 0.0)
             for o in observations]
 
 
