@@ -121,6 +121,10 @@ def test_superpixel_build_half_size_camera_and_positions(tmp_path: Path):
     np.testing.assert_allclose(view.t, cam.t)
     # Linear values: the background, away from blobs and borders, is 1e3 DN/s in every colour.
     assert np.median(img[..., 1]) == pytest.approx(1.0e3, rel=0.02)
+    # Its noise: a superpixel's green averages two sites, so half the variance of red or blue.
+    sd = view.read_noise()
+    ratio = np.median(sd[..., 1] ** 2) / np.median(sd[..., 0] ** 2)
+    assert ratio == pytest.approx(0.5, rel=0.05)
     # Each blob's centroid in the written (undistorted, half-size) image is where cameras.json's
     # pinhole projects its 3-D point (green: the mean of the two green sites is cell-centred).
     proj, _ = cv2.projectPoints(X, np.zeros(3), np.asarray(view.t, float),

@@ -220,9 +220,10 @@ def test_recovers_glass_absorption_from_a_raw_built_capture(tmp_path):
     (raw / "build.json").write_text(json.dumps({"cameras": "cameras.json", "cfa_pattern": "RGGB",
                                                 "views": views}))
     capture, _ = build_capture(raw / "build.json", tmp_path / "capture")
-    assert all(v.processing is not None for v in capture.views)
+    assert all(v.processing is not None and v.noise is not None for v in capture.views)
     result = fit(tmp_path / "start.toml", tmp_path / "capture",
                  settings=FitSettings(spp=32, max_iterations=12, refinement_steps=6))
+    assert result.summary()["pixel_weights"]  # weighed by the build's noise images
     absorption = result.values["glass.absorption"]
     stderr = result.vector.split(result.uncertainty.stderr)["glass.absorption"]
     assert not result.checks, result.checks

@@ -249,7 +249,10 @@ def build_capture(build_file: str | Path, out: str | Path,
             # variances its pixels are made from: what weighs pixels against each other; the
             # spreading of each site's noise to its neighbours is the footprint's correlation).
             # Pixels that sample outside the frame (none at the build's zoom) weigh least.
-            variance = undistort_image(merged.variance, cam_img, K_new).astype(np.float64)
+            variance = merged.variance
+            if superpixel:  # a superpixel's green is the mean of its cell's two green sites
+                variance = variance * np.array([1.0, 0.5, 1.0], np.float32)
+            variance = undistort_image(variance, cam_img, K_new).astype(np.float64)
             variance = np.where(variance > 0, variance, max(float(variance.max()), _MIN_VARIANCE))
             noise[entry["name"]] = np.sqrt(np.maximum(variance, _MIN_VARIANCE))
         if entry.get("mask") is not None:

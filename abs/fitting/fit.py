@@ -74,6 +74,7 @@ class FitResult:
     monte_carlo_points: int = 0
     difference_steps: dict[str, DifferenceStep] | None = None
     data_correlation: np.ndarray | None = None  # (P, P), of the photographs' (Laplace) share alone
+    pixel_weights: bool = False  # residuals weighed by the capture's noise images
 
     def summary(self) -> dict:
         """``fit.json`` (public contract, see docs/fitting.md, "Outputs")."""
@@ -113,6 +114,7 @@ class FitResult:
             # Iterates whose scatter gave the standard errors' Monte-Carlo part (0 or 1: none).
             "monte_carlo_points": self.monte_carlo_points,
             "image_noise": self.image_noise,
+            "pixel_weights": self.pixel_weights,
             "checks": list(self.checks),
             **({"scan": self.scan} if self.scan else {}),
             **({"starts": self.starts.to_dict()} if self.starts is not None else {}),
@@ -329,7 +331,8 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                        previous_wall + time.perf_counter() - t0, history, views, truth, image_noise,
                        scan=scans, limited=limited, starts=starts,
                        monte_carlo_points=monte_carlo_points, difference_steps=steps,
-                       data_correlation=photographs.correlation)
+                       data_correlation=photographs.correlation,
+                       pixel_weights=problem.weights is not None)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     # The scene's own geometry first: coincident surfaces make the renders themselves ambiguous.

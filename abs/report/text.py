@@ -11,7 +11,8 @@ __all__ = ["summary_lines"]
 
 def summary_lines(summary: Mapping) -> list[str]:
     """Where several starts went (when there were any), the difference steps a pilot chose (when
-    one ran), ``name = [value ± stderr, ...] unit`` per parameter, then RMSE before -> after."""
+    one ran), ``name = [value ± stderr, ...] unit`` per parameter, whether pixels were weighed by
+    the capture's noise images, then RMSE before -> after."""
     lines = []
     starts = summary.get("starts")
     if starts:
@@ -27,6 +28,8 @@ def summary_lines(summary: Mapping) -> list[str]:
         values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g} (unconstrained)"
                            for v, s in zip(entry["value"], entry["stderr"]))
         lines.append(f"{name} = [{values}] {entry['unit']}")
+    if summary.get("pixel_weights"):
+        lines.append("pixels weighed by the capture's noise images (the RMSEs below are not)")
     for split in ("train", "holdout"):
         rmse = summary[f"{split}_rmse"]
         if rmse["before"] is not None:
