@@ -121,7 +121,7 @@ def test_cli_build_and_calibrate_errors(tmp_path: Path, capsys):
     assert main(["capture", "build", str(build_file), "--out", str(tmp_path / "cap"),
                  "--report", str(tmp_path / "rep")]) == 0
     assert (tmp_path / "cap" / "cameras.json").is_file()
-    assert (tmp_path / "rep" / "v0_weight.png").is_file()
+    assert (tmp_path / "rep" / "v0_weight.png").is_file() and (tmp_path / "rep" / "v0_noise.png").is_file()
     blank = tmp_path / "blank.png"
     cv2.imwrite(str(blank), np.full((48, 64), 128, np.uint8))
     assert main(["calibrate", "intrinsics", str(blank), "--board", "checkerboard:9x6:25mm",

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 __all__ = ["write_coverage_png", "write_detection_png", "write_view_rms_png",
-           "write_weight_png"]
+           "write_weight_png", "write_noise_png"]
 
 
 def write_coverage_png(path: Path, counts: np.ndarray) -> None:
@@ -63,3 +63,31 @@ def write_weight_png(path: Path, weight_s: np.ndarray) -> None:
     w = weight_s if weight_s.ndim == 2 else weight_s.mean(axis=-1)
     scaled = np.clip(w / max(float(w.max()), 1e-30) * 255.0, 0, 255).astype(np.uint8)
     cv2.imwrite(str(path), scaled)
+
+
+def write_noise_png(path: Path, image: np.ndarray, noise_sd: np.ndarray) -> None:
+    """A built photograph's noise relative to its value (channels averaged), log scale with a
+    colour bar in per cent: where the merged brackets are quiet (near full well in some frame)
+    and where they are not (dark pixels, frames' edges)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+    from matplotlib.ticker import FuncFormatter
+
+    value = np.maximum(np.asarray(image, np.float64).mean(axis=-1), 1e-30)
+    relative = 100.0 * np.asarray(noise_sd, np.float64).mean(axis=-1) / value
+    relative = np.clip(relative, 1e-3, 1e3)
+    height, width = relative.shape
+    fig, ax = plt.subplots(figsize=(4.0 + 2.0, 4.0 * height / max(width, 1) + 0.4))
+    shown = ax.imshow(relative, cmap="magma", norm=LogNorm(vmin=max(relative.min(), 1e-2),
+                                                            vmax=max(relative.max(), 1e-1)))
+    ax.set_axis_off()
+    bar = fig.colorbar(shown, ax=ax, label="noise / value (%)")
+    plain = FuncFormatter(lambda v, _: f"{v:g}")
+    bar.ax.yaxis.set_major_formatter(plain)
+    bar.ax.yaxis.set_minor_formatter(plain)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

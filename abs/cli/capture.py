@@ -1,7 +1,8 @@
 """``abs capture build BUILD.json --out CAPTURE``: photographs + darks + calibration -> capture.
 
 The build file format is in :mod:`abs.acquisition.build`. ``--report DIR`` writes each view's
-HDR weight map (total exposure time used per pixel) as PNG. ``--demosaic bilinear|superpixel``
+HDR weight map (total exposure time used per pixel) and, for raw views, its noise relative to
+its value (``<name>_noise.png``) as PNG. ``--demosaic bilinear|superpixel``
 overrides the build file's ``demosaic`` (default bilinear; superpixel halves the resolution).
 """
 
@@ -17,7 +18,7 @@ def add_parser(sub) -> None:
                                        "write cameras.json plus EXRs")
     q.add_argument("build_file", type=Path, help="build file (JSON) listing views and frames")
     q.add_argument("--out", type=Path, required=True, help="capture folder to write")
-    q.add_argument("--report", type=Path, help="folder for the HDR weight maps")
+    q.add_argument("--report", type=Path, help="folder for the HDR weight maps and noise maps")
     q.add_argument("--demosaic", choices=("bilinear", "superpixel"), default=None,
                    help="demosaicing method, overriding the build file's 'demosaic' (default "
                         "bilinear): 'superpixel' makes one RGB pixel of each 2x2 CFA cell, no "
@@ -29,7 +30,7 @@ def run(args) -> int:
     from tqdm import tqdm
 
     from abs.acquisition.build import build_capture
-    from abs.acquisition.figures import write_weight_png
+    from abs.acquisition.figures import write_noise_png, write_weight_png
     from abs.errors import read_json
 
     # Read first only to size the progress bar; a bad file fails here with build_capture's error.
@@ -47,6 +48,10 @@ def run(args) -> int:
         if args.report:
             args.report.mkdir(parents=True, exist_ok=True)
             write_weight_png(args.report / f"{name}_weight.png", merged.weight)
+            view = capture.view(name)
+            if view.noise is not None:
+                write_noise_png(args.report / f"{name}_noise.png", view.read_image(),
+                                view.read_noise())
     blur = capture.views[0].blur_px
     print("processing (demosaicing, undistortion): written per view; fits render the sensor "
           "sites and apply the build's weights")
