@@ -9,7 +9,8 @@ posterior or the diagnosis built on it.
 residual vector stacks, over the training views, ``clamp(rendering) - photograph`` on every masked
 pixel and channel (linear RGB), times the pixel's weight when the capture gives the photographs'
 noise (:func:`abs.model.observations.pixel_weights`: the noisier the pixel, the smaller; 1 for a
-typical pixel, and for every pixel without noise images). Derivatives come from Dr.Jit, never from finite differences:
+typical pixel, and for every pixel without noise images). Derivatives come from Dr.Jit, never
+from finite differences:
 
 - :meth:`FitProblem.residuals` with ``jacobian=True`` renders forward-mode derivatives
   (:meth:`CompiledScene.render_forward`: tangents carried inside the path loop, about 1.6 primal

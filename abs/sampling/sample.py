@@ -313,7 +313,9 @@ def _estimate_noise(problem, theta: np.ndarray, spp: int, seed: int, n_renders: 
         variance = render_variance([problem.render(obs, theta, spp, seed + 2 + n_renders * k + i)
                                     for i in range(n_renders)])
         # In the residuals' units: weighted when the capture gives the photographs' noise.
-        renders.append(variance if problem.weights is None else variance * np.square(problem.weights[k]))
+        if problem.weights is not None:
+            variance = variance * np.square(problem.weights[k])
+        renders.append(variance)
         immerkaer.append(estimate_image_noise(obs.photograph, obs.camera))
         n = 3 * obs.pixels
         half_render = renders[-1][obs.mask].ravel() / 2
