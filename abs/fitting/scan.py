@@ -27,7 +27,8 @@ class ScanResult:
     ----------
     name, unit : str
     grids, rmse : list of ndarray
-        Per channel: the scanned values and the RMSE (linear RGB) at each.
+        Per channel: the scanned values and the RMSE (linear RGB; of the residuals as the
+        problem weighs them, :attr:`abs.model.FitProblem.weights`) at each.
     minimum : ndarray
         Per channel: the estimated minimiser.
     renders, samples_rendered : int
