@@ -96,6 +96,11 @@ def test_merge_variance_is_the_scatter_of_repeated_merges():
     # keeps each pixel near full well): equal weights would let the brightest pixels dominate.
     relative = np.sqrt(stated) / radiance
     assert relative[0] > 4 * relative[-1] and relative[-1] < 0.03
+    # A pixel saturated even in the shortest frame is a lower bound: its noise is its own size.
+    merged = merge_brackets([_sensor(np.array([1e7]), ti, rng) for ti in t], t, 4095.0,
+                            [np.full(1, 64.0)] * len(t))
+    assert merged.saturated_everywhere[0]
+    assert np.sqrt(merged.variance[0]) >= merged.radiance[0] * (1 - 1e-6)
 
 
 def test_merge_without_exclusion_would_be_biased():

@@ -83,13 +83,21 @@ def test_noise_images_round_trip_and_are_checked(tmp_path):
     cap = save_capture(tmp_path / "cap", _views(), images, noise=sd)
     assert cap.view("v1").noise is None and cap.view("v1").read_noise() is None
     np.testing.assert_allclose(cap.view("v0").read_noise(), sd["v0"], rtol=1e-6)
-    assert json.loads((tmp_path / "cap" / "cameras.json").read_text())["noise"] == {"v0": "v0_noise.exr"}
-    # Copied from its View objects, a capture keeps them.
+    assert json.loads((tmp_path / "cap" / "cameras.json").read_text())["noise"] == {"v0": "noise/v0.exr"}
+    # Copied from its View objects, a capture keeps them, unless its photograph is replaced.
     copy = save_capture(tmp_path / "copy", cap.views)
     np.testing.assert_allclose(copy.view("v0").read_noise(), sd["v0"], rtol=1e-6)
+    assert save_capture(tmp_path / "new", cap.views, {"v0": 2 * images["v0"]}).view("v0").noise is None
+    # A view named like a noise image keeps its own photograph.
+    views = _views()
+    views[1]["name"] = "v0_noise"
+    both = save_capture(tmp_path / "both", views, {"v0": images["v0"], "v0_noise": images["v1"]},
+                        noise=sd)
+    np.testing.assert_array_equal(both.view("v0_noise").read_image(), images["v1"])
+    np.testing.assert_allclose(both.view("v0").read_noise(), sd["v0"], rtol=1e-6)
     # A file naming an unknown view, a noise image of another size, a value not positive.
     folder = tmp_path / "cap"
-    _edit(folder, lambda d: d["noise"].update(v9="v0_noise.exr"))
+    _edit(folder, lambda d: d["noise"].update(v9="noise/v0.exr"))
     _expect_error(folder, "noise.v9")
     _edit(folder, lambda d: d.update(noise={"v0": "v1.exr", "v1": "missing.exr"}))
     _expect_error(folder, "noise.v1")
@@ -99,9 +107,9 @@ def test_noise_images_round_trip_and_are_checked(tmp_path):
     with pytest.raises(CaptureError, match="differs"):
         save_capture(tmp_path / "bad", _views(), images, noise={"v0": sd["v0"][:2]})
     from abs.io.images import write_exr
-    write_exr(folder / "v0_noise.exr", np.zeros((H, W, 3), np.float32))
-    _edit(folder, lambda d: d.update(noise={"v0": "v0_noise.exr"}))
-    with pytest.raises(CaptureError, match="v0_noise.exr.*not finite and positive"):
+    write_exr(folder / "noise" / "v0.exr", np.zeros((H, W, 3), np.float32))
+    _edit(folder, lambda d: d.update(noise={"v0": "noise/v0.exr"}))
+    with pytest.raises(CaptureError, match="v0.exr.*not finite and positive"):
         load_capture(folder).view("v0").read_noise()
 
 

@@ -114,8 +114,13 @@ def test_pixel_weights_give_the_maximum_likelihood_fit_under_uneven_noise(small_
     assert abs(np.mean(estimates["weighted"]) - theta[0]) < 3 * stated / np.sqrt(40)
     assert 0.75 < scatter["weighted"] / stated < 1.3, (scatter, stated)  # 40 draws: +- 11 %
     assert scatter["plain"] > 3 * scatter["weighted"], scatter
-    # The reverse-mode gradient weighs alike (Adam's path): J^T W^2 r.
-    half, g = weighted.gradient(theta * 1.1, 16, seed=4, jacobian_seed=4)
-    r, J = weighted.residuals(theta * 1.1, 16, seed=4, jacobian=True)
+    # The reverse-mode gradient weighs alike (Adam's path, path replay: without recordings,
+    # which would give J^T r from residuals() itself): J^T W^2 r.
+    # Weights that vary over the image (shot-noise-like), so that w and w^2 differ everywhere.
+    varied = [replace(o, noise_sd=0.005 * (0.2 + c)) for o, c in zip(weighted.observations, clean)]
+    replay = FitProblem(model.compiled, model.vector, varied, reweight=False)
+    assert not replay.uses_recordings and np.ptp(replay.weights[0][replay.observations[0].mask]) > 0.5
+    half, g = replay.gradient(theta * 1.1, 16, seed=4, jacobian_seed=4)
+    r, J = replay.residuals(theta * 1.1, 16, seed=4, jacobian=True)
     assert half == pytest.approx(0.5 * r @ r, rel=1e-6)
     assert g == pytest.approx(J.T @ r, rel=2e-3)

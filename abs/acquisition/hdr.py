@@ -38,9 +38,11 @@ class MergedHDR:
     variance : np.ndarray
         The radiance's noise variance, (data numbers per second)^2, float32: the frames' shot
         noise at one electron per data number plus their read noise (``read_noise_dn``), carried
-        through the merge. A camera's gain (electrons per data number) scales the shot term,
-        so the values are right up to about one factor per camera: enough to weigh pixels
-        against each other (``noise`` of a capture, :mod:`abs.io.capture`).
+        through the merge; at least the value's square where it is a lower bound (saturated
+        everywhere). A camera's gain (electrons per data number) scales the shot term, and
+        where shot noise dominates (all but the darkest pixels) the values are right up to about
+        one factor per camera: enough to weigh pixels against each other (``noise`` of a
+        capture, :mod:`abs.io.capture`).
     """
 
     radiance: np.ndarray
@@ -144,7 +146,9 @@ def merge_brackets(frames: Sequence[np.ndarray], exposures_s: Sequence[float],
     counts = np.maximum(signal, 0.0)
     variance = (np.sum(np.where(used, counts + read, 0.0), axis=0)
                 / np.where(weight > 0, weight, 1.0) ** 2)
-    variance = np.where(saturated_all, (counts[0] + read) / t[0] ** 2, variance)
+    # A value saturated in every frame is a lower bound: its error is as large as itself.
+    variance = np.where(saturated_all, np.maximum((counts[0] + read) / t[0] ** 2,
+                                                  np.square(radiance)), variance)
     unsaturated = ~saturated
     variance = np.where(dark_all, np.sum(np.where(unsaturated, counts + read, 0.0), axis=0)
                         / t.sum() ** 2, variance)

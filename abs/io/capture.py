@@ -10,7 +10,7 @@ A capture folder holds ``cameras.json`` next to the photographs::
      "processing": {"v0": {"width": 1280, "height": 1024, "K": [[...], [...], [...]],
                            "distortion": [k1, k2, p1, p2, k3], "demosaic": "bilinear",
                            "cfa_pattern": "RGGB"}},
-     "noise": {"v0": "v0_noise.exr"}}
+     "noise": {"v0": "noise/v0.exr"}}
 
 - ``name``: unique, usable as a file name (letters, digits, ``_``, ``-``, ``.``; not starting
   with ``.`` or ``-``; at most 128 characters).
@@ -583,8 +583,9 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                  processing: Mapping[str, SensorProcessing] | None = None,
                  noise: Mapping[str, np.ndarray] | None = None) -> Capture:
     """Write a capture folder: ``<name>.exr`` photographs, ``<name>_mask.png`` masks,
-    ``<name>_noise.exr`` noise images and ``cameras.json`` (written last, atomically), then load
-    it back.
+    ``noise/<name>.exr`` noise images (a folder of their own: no view's name can make a noise
+    image's file another view's photograph) and ``cameras.json`` (written last, atomically),
+    then load it back.
 
     Parameters
     ----------
@@ -608,7 +609,8 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
     noise : mapping of str to np.ndarray, optional
         The photographs' noise standard deviation, ``(height, width, 3)``, per view name
         (top-level ``noise``; up to a factor common to the capture). A :class:`View` missing
-        here keeps its existing noise image, if any.
+        here keeps its existing noise image, if any, unless ``images`` replaces its photograph
+        (the old noise image would not describe the new one).
 
     Returns
     -------
@@ -705,7 +707,7 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
             if bad:
                 raise CaptureError(None, f"noise[{name!r}]", f"{bad} values are not finite and "
                                                              "positive")
-        elif isinstance(item, View) and item.noise is not None:
+        elif isinstance(item, View) and item.noise is not None and name not in images:
             sd = item.read_noise()
         prepared.append((spec, rgb, mask, sd))
     for what, given in (("images", images), ("masks", masks), ("processing", processing),
@@ -723,7 +725,8 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
             mask_path = folder / f"{spec['name']}_mask.png"
             write_mask(mask_path, mask)
         if sd is not None:
-            noise_path = folder / f"{spec['name']}_noise.exr"
+            noise_path = folder / "noise" / f"{spec['name']}.exr"
+            noise_path.parent.mkdir(exist_ok=True)
             write_exr(noise_path, sd)
         saved.append(View(image=image_path, width=rgb.shape[1], height=rgb.shape[0],
                           mask=mask_path, processing=processing.get(spec["name"]),
@@ -738,7 +741,7 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
                              for name, p in processing.items())
         text += ',\n  "processing": {\n' + entries + "\n  }"
     if any(v.noise is not None for v in saved):
-        entries = ",\n".join(f"    {json.dumps(v.name)}: {json.dumps(v.noise.name)}"
+        entries = ",\n".join(f"    {json.dumps(v.name)}: {json.dumps(f'noise/{v.noise.name}')}"
                               for v in saved if v.noise is not None)
         text += ',\n  "noise": {\n' + entries + "\n  }"
     text += "\n}\n"

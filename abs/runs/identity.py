@@ -31,6 +31,24 @@ def _capture_folder(capture) -> str:
     return str(Path(folder).resolve())
 
 
+def _capture_entries(capture) -> dict:
+    """The capture's entries of an identity: its folder, and ``pixel_weights`` only when its
+    photographs come with noise images (residuals are then weighed, docs/fitting.md): a capture
+    rebuilt in place with them is another run, and runs saved before noise images existed keep
+    their identity."""
+    from abs.errors import CaptureError
+    from abs.io.capture import load_capture
+
+    entries = {"capture": _capture_folder(capture)}
+    try:
+        loaded = capture if hasattr(capture, "views") else load_capture(capture)
+    except CaptureError:  # not a capture (yet): the run itself says so, naming the file
+        return entries
+    if any(v.noise is not None for v in loaded.views):
+        entries["pixel_weights"] = True
+    return entries
+
+
 _ADDED_LATER = ("tie",)
 
 
@@ -65,7 +83,7 @@ def run_identity(scene, capture, names: Sequence[str], settings, *, initial: Map
     initial : mapping, optional
         Start values; entered (as given) only when not ``None``.
     """
-    identity = {"scene": str(getattr(scene, "source", scene)), "capture": _capture_folder(capture),
+    identity = {"scene": str(getattr(scene, "source", scene)), **_capture_entries(capture),
                 "parameters": list(names)}
     if initial is not None:
         identity["initial"] = initial
@@ -78,7 +96,7 @@ def model_identity(scene, capture, names: Sequence[str], initial: Mapping[str, o
     fits): the scene file's digest, the capture folder, the parameters, their start and all the
     settings."""
     text = Path(scene.source).read_bytes()
-    return {"scene": hashlib.sha256(text).hexdigest(), "capture": _capture_folder(capture),
+    return {"scene": hashlib.sha256(text).hexdigest(), **_capture_entries(capture),
             "parameters": list(names), "initial": {n: np.asarray(v).tolist() for n, v in initial.items()},
             "settings": _settings(settings, None, ())}
 
