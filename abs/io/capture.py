@@ -202,6 +202,20 @@ def _check_processing(value: Any, source: Path | None, field: str) -> "SensorPro
                             None if demosaic is None else pattern, blur)
 
 
+def _check_noise(sd: Any, shape: tuple[int, ...], source: Path | None, field: str) -> np.ndarray:
+    """A noise image (standard deviations) as float64, checked: the photograph's ``shape``,
+    every value finite and positive."""
+    sd = np.asarray(sd, np.float64)
+    if sd.shape != tuple(shape):
+        raise CaptureError(source, field, f"noise image of shape {sd.shape} differs from the "
+                                          f"photograph's {tuple(shape)}")
+    bad = int(np.count_nonzero(~(np.isfinite(sd) & (sd > 0))))
+    if bad:
+        raise CaptureError(source, field, f"{bad} values are not finite and positive (a standard "
+                                          "deviation per pixel and channel)")
+    return sd
+
+
 def lens_blur_px(value: Any) -> float:
     """A lens blur's standard deviation (sensor pixels) as given in a file, checked: a number in
     [0, 10]. The one rule for the capture's ``processing`` and the build file that writes it;
@@ -358,16 +372,8 @@ class View:
         """
         if self.noise is None:
             return None
-        sd = np.asarray(read_image(self.noise), np.float64)
-        field = f"noise.{self.name}"
-        if sd.shape != (self.height, self.width, 3):
-            raise CaptureError(self.noise, field, f"noise image is {sd.shape[1]}x{sd.shape[0]} "
-                                                  f"pixels, photograph {self.width}x{self.height}")
-        bad = int(np.count_nonzero(~(np.isfinite(sd) & (sd > 0))))
-        if bad:
-            raise CaptureError(self.noise, field, f"{bad} values are not finite and positive (a "
-                                                  "standard deviation per pixel and channel)")
-        return sd
+        return _check_noise(read_image(self.noise), (self.height, self.width, 3), self.noise,
+                            f"noise.{self.name}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -699,14 +705,7 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
 
         sd = None
         if name in noise:
-            sd = np.asarray(noise[name], np.float64)
-            if sd.shape != rgb.shape:
-                raise CaptureError(None, f"noise[{name!r}]", f"shape {sd.shape} differs from the "
-                                                             f"photograph's {rgb.shape}")
-            bad = int(np.count_nonzero(~(np.isfinite(sd) & (sd > 0))))
-            if bad:
-                raise CaptureError(None, f"noise[{name!r}]", f"{bad} values are not finite and "
-                                                             "positive")
+            sd = _check_noise(noise[name], rgb.shape, None, f"noise[{name!r}]")
         elif isinstance(item, View) and item.noise is not None and name not in images:
             sd = item.read_noise()
         prepared.append((spec, rgb, mask, sd))
