@@ -124,3 +124,25 @@ def test_pixel_weights_give_the_maximum_likelihood_fit_under_uneven_noise(small_
     r, J = replay.residuals(theta * 1.1, 16, seed=4, jacobian=True)
     assert half == pytest.approx(0.5 * r @ r, rel=1e-6)
     assert g == pytest.approx(J.T @ r, rel=2e-3)
+
+
+def test_the_samplers_render_variance_is_weighed_as_its_residuals_are(small_scene_dir, capture):
+    """The sampler's likelihood adds the renders' variance to the photographs' per residual: with
+    noise images, both in the weighted residuals' units (w^2 times the rendered variance)."""
+    from dataclasses import replace
+
+    from abs.model import FitProblem, build_model
+    from abs.sampling.sample import _estimate_noise
+
+    model = build_model(small_scene_dir / "scene.toml", capture, ["environment.scale"])
+    plain = model.problem("train")
+    theta = model.vector.initial
+    varied = [replace(o, noise_sd=0.005 * (0.2 + o.photograph)) for o in plain.observations]
+    weighted = FitProblem(model.compiled, model.vector, varied)
+    unweighted = FitProblem(model.compiled, model.vector, [replace(o, noise_sd=None) for o in varied])
+    a = _estimate_noise(weighted, theta, 4, 7, 3)
+    b = _estimate_noise(unweighted, theta, 4, 7, 3)
+    for k, w in enumerate(weighted.weights):
+        np.testing.assert_allclose(a.render_variance[k], b.render_variance[k] * w ** 2, rtol=1e-6,
+                                   atol=1e-12)
+    assert np.ptp(weighted.weights[0][weighted.observations[0].mask]) > 0.5

@@ -64,3 +64,23 @@ def test_a_different_run_is_refused_naming_the_field():
         check_identity(Path("chain.h5"), "abs", {"parameters": ["a"]}, {"parameters": ["b"]},
                        "chain was sampled", "drop --resume")
     check_identity(Path("chain.h5"), "abs", {"parameters": ["a"], "extra": 1}, {"parameters": ["a"]}, "", "")
+
+
+def test_a_capture_with_noise_images_is_another_run_than_the_same_folder_without(tmp_path):
+    import numpy as np
+
+    from abs.camera.pinhole import intrinsics_from_fov, look_at
+    from abs.io.capture import load_capture, save_capture
+
+    R, t = look_at([0, 0.1, 0.4], [0, 0, 0])
+    views = [{"name": "v0", "K": intrinsics_from_fov(8, 6, np.deg2rad(40)), "R": R, "t": t}]
+    image = np.full((6, 8, 3), 0.5, np.float32)
+    save_capture(tmp_path / "capture", views, {"v0": image})
+    scene, s = _Scene(tmp_path / "scene.toml"), _Settings()
+    plain = run_identity(scene, tmp_path / "capture", ["a"], s)
+    assert "pixel_weights" not in plain  # runs saved before noise images still resume
+    # Rebuilt in place, now with the photographs' noise: its residuals are weighed.
+    save_capture(tmp_path / "capture", views, {"v0": image}, noise={"v0": 0.01 + 0 * image})
+    weighted = run_identity(scene, tmp_path / "capture", ["a"], s)
+    assert weighted == {**plain, "pixel_weights": True}
+    assert run_identity(scene, load_capture(tmp_path / "capture"), ["a"], s) == weighted
