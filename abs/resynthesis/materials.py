@@ -38,8 +38,7 @@ from abs.errors import InputError
 
 __all__ = ["GLOSSIER_FACTOR", "DIFFUSE_FACTOR", "GLASS_IOR", "FROSTED_ROUGHNESS",
            "TRANSLUCENT_ROUGHNESS", "DARK_TRANSMITTANCE", "current_material", "target_material",
-           "check_target",
-           "TRANSMISSIVE"]
+           "check_target", "KEEPS_SURFACE"]
 
 GLOSSIER_FACTOR = 5.0
 """``glossier`` divides the roughness by this."""
@@ -49,8 +48,11 @@ GLASS_IOR = 1.5
 FROSTED_ROUGHNESS = 0.15
 TRANSLUCENT_ROUGHNESS = 0.6
 DARK_TRANSMITTANCE = 0.1
-TRANSMISSIVE = ("glass", "translucent")
-"""Kinds whose rendering replaces the object (see ``method.composite``)."""
+KEEPS_SURFACE = ("glossier", "diffuse")
+"""Kinds that keep the surface (its pigment and coating; only the roughness changes): the
+photograph's residual against the fitted current material belongs to that surface and stays in
+the edit (differential rendering, ``method.composite``). Every other kind replaces the surface,
+and its rendering replaces the object."""
 
 
 def current_material(reflectance, roughness: float) -> dict:
