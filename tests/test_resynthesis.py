@@ -11,6 +11,7 @@ light's radiance everywhere.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -357,6 +358,115 @@ def test_a_measured_brdf_replaces_the_surface_and_its_texture():
     assert squares_ratio(merl) == pytest.approx(1.0, abs=0.04)
     glossier = resynthesis.edit_fitted(photo, mask, parse_material("glossier"), scene, SETTINGS)
     assert squares_ratio(glossier) < 0.8
+
+
+def sun_lit_coating(alpha: float, width: int = 96, height: int = 72, spp: int = 256):
+    """A sphere of bare coating (plastic of reflectance 0, GGX ``alpha``) lit by nothing but a
+    sun of irradiance ``SUN_IRRADIANCE`` in ``SUN``: the highlight alone, as the photograph's
+    camera (``photo_camera``: at the origin, looking along world +z) sees it. Returns the image,
+    its mask and the camera's view."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from abs.render.camera import Camera
+    from abs.render.environment import Environment
+    from abs.render.integrator import PathTracer
+    from abs.resynthesis.highlight import sun_map
+    from abs.resynthesis.studio import photo_camera
+
+    view = photo_camera((height, width), FOV)
+    camera = Camera(view["K"], view["R"], view["t"], width, height)
+    bsdf = {"type": "roughplastic", "distribution": "ggx", "alpha": alpha, "int_ior": 1.49,
+            "diffuse_reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    scene = mi.load_dict({"type": "scene", "s": {
+        "type": "sphere", "radius": 0.05, "center": [0.0, 0.0, 0.35], "bsdf": bsdf}})
+    light = Environment(SUN_IRRADIANCE * sun_map(256, SUN))
+    image = np.asarray(PathTracer(max_depth=4).render(scene, light, camera, spp, seed=1),
+                       np.float32)
+    idx = dr.arange(mi.UInt32, width * height)
+    origin, d = camera.rays(mi.Float(idx % width), mi.Float(idx // width))
+    mask = np.asarray(scene.ray_intersect(mi.Ray3f(origin, d)).is_valid(), bool).reshape(
+        height, width)
+    return image, mask, view
+
+
+SUN_IRRADIANCE = 40.0
+#: Behind the camera, up and to the left (world: +y up, the camera looks along +z).
+SUN = np.array([0.35, 0.45, -0.82]) / np.linalg.norm([0.35, 0.45, -0.82])
+
+
+def test_a_sun_map_holds_unit_irradiance_at_any_size():
+    from abs.editing.environment import latlong_directions
+    from abs.resynthesis.highlight import sun_map
+
+    for height in (64, 256, 540):
+        latlong = sun_map(height, SUN)
+        theta = np.pi * np.arange(height) / (height - 1)
+        d_theta = np.full(height, np.pi / (height - 1))
+        d_theta[[0, -1]] /= 2
+        solid_angle = 2 * np.pi / (2 * height) * d_theta * np.maximum(np.sin(theta),
+                                                                      np.sin(d_theta / 2))
+        assert (latlong[..., 0] * solid_angle[:, None]).sum() == pytest.approx(1.0, rel=1e-6)
+        # ... where the direction points: its texels' directions average to it.
+        dirs = latlong_directions(height, 2 * height)
+        weights = latlong[..., 0] * solid_angle[:, None]
+        mean = (dirs * weights[..., None]).sum(axis=(0, 1))
+        assert np.degrees(np.arccos(mean @ SUN / np.linalg.norm(mean))) < 180 / height
+
+
+@pytest.fixture(scope="module")
+def highlight_fit():
+    """A true sphere's highlight (GGX 0.05) explained on the mesh inflated from its mask."""
+    from abs.resynthesis.method import _highlight_roughness
+
+    image, mask, view = sun_lit_coating(0.05)
+    vertices, faces = inflated_mesh(mask, view["K"], distance=1.0)
+    inner = fit_mask(mask)
+    settings = dataclasses.replace(SETTINGS, roughness_candidates=(0.02, 0.05, 0.1, 0.2))
+    choice = _highlight_roughness(image, inner, fit_mask(mask, image, 20.0), view, vertices,
+                                  faces, [0.0, 0.0, 0.0], np.zeros((128, 256, 3), np.float32),
+                                  settings.roughness_candidates, settings)
+    return image, mask, view, vertices, faces, choice, settings
+
+
+def test_a_highlight_tells_the_roughness_and_where_the_sun_is(highlight_fit):
+    # What the smooth model leaves of a sun's highlight (here the highlight alone, a bare
+    # coating under a lone sun) is reproduced best by the lobe of the true roughness on the
+    # inflated mesh, and the fitted sun is the true one (highlight module). Measured: highlight
+    # RMSE 0.69 / 0.52 / 0.90 / 1.18 for GGX 0.02 / 0.05 / 0.1 / 0.2 (true 0.05); the sun
+    # 1.2 degrees off, its irradiance 35.8 for 40.
+    *_, choice, _ = highlight_fit
+    assert choice is not None and choice["pixels"] >= 4
+    assert choice["roughness"] == 0.05
+    rmse = choice["rmse"]
+    assert rmse["0.05"] < 0.85 * min(rmse["0.02"], rmse["0.1"])
+    found = np.asarray(choice["sun_direction"])
+    assert np.degrees(np.arccos(np.clip(found @ SUN, -1.0, 1.0))) < 2.0
+    np.testing.assert_allclose(choice["sun_irradiance"], SUN_IRRADIANCE, rtol=0.2)
+
+
+def test_a_gloss_edit_reshapes_the_sun_s_highlight(highlight_fit):
+    # The fitted sun lights both renderings of a gloss edit (method.edit_fitted), so the
+    # highlight sharpens as the truth's does; without the sun the edit leaves it as
+    # photographed. Measured: RMSE to the truth over the object 1.42 with the sun, 2.45
+    # without (the photograph's own); the highlight's peak 70 for the truth's 118 (photograph 32).
+    from abs.resynthesis.method import FittedScene
+
+    image, mask, view, vertices, faces, choice, settings = highlight_fit
+    trust = {"reflectance": [0.0, 0.0, 0.0], "roughness": choice["roughness"],
+             "highlight": choice}
+    fitted = FittedScene(view, mask.shape, vertices, faces, np.zeros((128, 256, 3), np.float32),
+                         trust)
+    truth, _, _ = sun_lit_coating(0.05 / 5)
+    inner = fit_mask(mask)
+    edited = resynthesis.edit_fitted(image, mask, parse_material("glossier"), fitted, settings)
+    without = resynthesis.edit_fitted(
+        image, mask, parse_material("glossier"),
+        dataclasses.replace(fitted, trust={k: v for k, v in trust.items() if k != "highlight"}),
+        settings)
+    rmse = lambda a: float(np.sqrt(np.mean((a - truth)[inner] ** 2)))  # noqa: E731
+    np.testing.assert_allclose(without, image, atol=1e-6)
+    assert rmse(edited) < 0.7 * rmse(image)
 
 
 # ------------------------------------------------------------------------------ API, errors

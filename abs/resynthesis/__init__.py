@@ -9,6 +9,7 @@ the fitted scene. One concept per module:
 - :mod:`~abs.resynthesis.inflation`: a closed mesh from the mask;
 - :mod:`~abs.resynthesis.backdrop`: the environment map with the photograph's background;
 - :mod:`~abs.resynthesis.materials`: the current material and the targets as scene materials;
+- :mod:`~abs.resynthesis.highlight`: a sun fitted to the highlight, and the roughness it shows;
 - :mod:`~abs.resynthesis.studio`: the scene file, mesh, map and capture on disk;
 - :mod:`~abs.resynthesis.method`: fit, render, composite.
 

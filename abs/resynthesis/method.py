@@ -10,15 +10,19 @@ renderer then explains the photograph, and the edit is a rendering:
    (:mod:`~abs.resynthesis.backdrop`).
 2. **Fit** (:func:`abs.fit`, Levenberg-Marquardt with Laplace errors): the current material's
    reflectance (``plastic``) and the environment's scale, for each candidate roughness; the
-   candidate with the smallest residual wins. The fit compares the matte less its outline and
-   less a sun's sharp highlight (:func:`fit_mask`).
+   candidate with the smallest residual wins, unless a sun's highlight was left out: then, under
+   the light of step 3, the candidate whose coating lobe, lit by a sun fitted to that highlight,
+   reproduces it best (:mod:`~abs.resynthesis.highlight`; the residuals of the rest barely tell
+   the roughness), and step 3 again for it if it is another. The fit compares the matte less its
+   outline and less a sun's sharp highlight (:func:`fit_mask`).
 3. **Light.** The unseen part of the map (the backdrop stays as photographed) replaced by a
    smooth map fitted to the object as a light probe (:mod:`~abs.resynthesis.lighting`), starting
    from the scaled baseline map; then the material and scale fitted again under it. The residual
    RMSE against the photograph, and its ratio to the pixel noise, is the edit's trust measure
    (``EditResult.trust``).
 4. **Render** the object with the target material (:mod:`~abs.resynthesis.materials`) and with
-   the fitted current one, same seed; the fitted scale applies to the unseen light only.
+   the fitted current one, same seed; the fitted scale applies to the unseen light only. A gloss
+   edit's two renderings are lit by the fitted sun as well, which reshapes its highlight.
 5. **Composite** with the mask. Edits that keep the surface and change its roughness
    (``glossier``, ``diffuse``): differential rendering (Debevec 1998), ``photo + (new -
    current)``: what the fitted model misses of the photograph (its residual) stays in the edit,
@@ -48,6 +52,7 @@ from abs.editing.edit import EditResult, EditSettings, Estimates
 from abs.editing.spec import MaterialSpec
 from abs.errors import InputError
 from abs.resynthesis.backdrop import environment_with_backdrop, frustum_texels
+from abs.resynthesis.highlight import sun_map
 from abs.resynthesis.inflation import inflated_mesh
 from abs.resynthesis.lighting import hat_averages, hat_basis, map_from_gains, solve_gains
 from abs.resynthesis.materials import (KEEPS_SURFACE, check_target, current_material,
@@ -95,6 +100,11 @@ class SynthesisSettings:
     highlight_factor : float or None
         Highlights holding a pixel brighter than this times the object's median luminance are
         left out of the fits (:func:`fit_mask`); ``None`` keeps them.
+    highlight_roughness : bool
+        When such a highlight was left out, choose the roughness by how well a sun fitted to it
+        reproduces it (:mod:`~abs.resynthesis.highlight`), not by the residual of the rest.
+    sun_spp : int
+        Samples per pixel of that test's renderings.
     seed : int
         Seed of the renders.
     folder : str or None
@@ -115,6 +125,8 @@ class SynthesisSettings:
     light_spp: int = 16
     light_ridge: float = 1e-3
     highlight_factor: float | None = 20.0
+    highlight_roughness: bool = True
+    sun_spp: int = 32
     seed: int = 0
     folder: str | None = None
 
@@ -123,7 +135,8 @@ class SynthesisSettings:
         if not 0 < self.fov_deg < 180:
             raise InputError(None, f"{field}.fov_deg", f"expected degrees in (0, 180), got "
                                                        f"{self.fov_deg}")
-        for name in ("fit_spp", "render_spp", "light_spp", "max_iterations", "max_depth"):
+        for name in ("fit_spp", "render_spp", "light_spp", "sun_spp", "max_iterations",
+                     "max_depth"):
             if getattr(self, name) < 1:
                 raise InputError(None, f"{field}.{name}", f"must be at least 1, got "
                                                           f"{getattr(self, name)}")
@@ -221,6 +234,76 @@ def _fit_lighting(folder: Path, rgb: np.ndarray, inner: np.ndarray, view: dict,
     return map_from_gains(gains, fitted_env.shape[0], n_theta, n_phi)
 
 
+def _highlight_roughness(rgb: np.ndarray, inner: np.ndarray, compared: np.ndarray, view: dict,
+                         vertices: np.ndarray, faces: np.ndarray, reflectance, environment,
+                         candidates: tuple[float, ...], syn: SynthesisSettings) -> dict | None:
+    """The candidate roughness whose coating lobe, lit by a fitted sun, best reproduces the
+    highlight left out of the fits (:mod:`~abs.resynthesis.highlight`); ``None`` without one.
+
+    Parameters
+    ----------
+    inner, compared : np.ndarray
+        The matte less its outline (:func:`fit_mask` without highlights) and the pixels the fits
+        compared; the highlight is their difference.
+    reflectance, environment :
+        The fitted plastic's reflectance and the fitted map, which light every candidate.
+    candidates : tuple of float
+        The roughnesses tested.
+    """
+    from abs.render import Camera, compile_scene
+    from abs.render.environment import Environment
+    from abs.resynthesis.highlight import (MIN_HIGHLIGHT_PIXELS, fit_sun, mirror_direction,
+                                           sun_map)
+    from abs.scene import load_scene
+
+    highlight = inner & ~compared
+    if highlight.sum() < MIN_HIGHLIGHT_PIXELS:
+        return None
+    lum = luminance(np.asarray(rgb, np.float64))
+    # The sun's highlight is the region holding the most light, not the brightest pixel: a
+    # photograph's (or a rendering's) single-pixel sparkles can be brighter.
+    labels, count = ndimage.label(highlight, structure=np.ones((3, 3)))
+    energy = ndimage.sum(lum, labels, index=np.arange(1, count + 1))
+    brightest = labels == 1 + int(np.argmax(energy))
+    peak = np.unravel_index(np.argmax(np.where(brightest, lum, -np.inf)), lum.shape)
+    start = mirror_direction(vertices, faces, view["K"], view["R"], peak)
+    h, w = inner.shape
+    camera = Camera(view["K"], view["R"], view["t"], w, h)
+    # A texel of about 0.7 degrees, about the sun's own 0.53; the fitted map's finer texels
+    # would only slow the renderings.
+    sun_height = 256
+    fits = {}
+    with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
+        folder = Path(tmp)
+        write_mesh(folder, vertices, faces, view["R"], view["t"])
+        write_environment(folder, environment)
+
+        def compiled(name: str, material: dict):
+            return compile_scene(load_scene(write_scene_file(folder, name, material, syn.sun_spp,
+                                                             syn.max_depth)))
+
+        for roughness in candidates:
+            current = compiled(f"current_{roughness:g}.toml",
+                               current_material(reflectance, roughness))
+            residual = (rgb - np.asarray(current.render(camera, syn.sun_spp,
+                                                        seed=syn.seed + 13).numpy()))[inner]
+            # The coating alone: the sun's diffuse light is in the smooth light already.
+            coating = compiled(f"coating_{roughness:g}.toml",
+                               current_material([0.0] * 3, roughness))
+
+            def render(direction, coating=coating):
+                coating.environment = Environment(sun_map(sun_height, direction))
+                return np.asarray(coating.render(camera, syn.sun_spp,
+                                                 seed=syn.seed + 17).numpy())[inner]
+
+            fits[roughness] = fit_sun(residual, render, start)
+    best = min(fits, key=lambda r: fits[r].rmse)
+    return {"roughness": best, "pixels": int(highlight.sum()),
+            "rmse": {f"{r:g}": fits[r].rmse for r in fits},
+            "sun_direction": fits[best].direction.tolist(),
+            "sun_irradiance": fits[best].irradiance.tolist()}
+
+
 def composite(photo: np.ndarray, mask: np.ndarray, new: np.ndarray, current: np.ndarray | None,
               differential: bool) -> np.ndarray:
     """The edited photograph: inside ``mask`` the rendering of the target, outside the photograph.
@@ -241,9 +324,10 @@ def composite(photo: np.ndarray, mask: np.ndarray, new: np.ndarray, current: np.
     return np.where(mask[..., None], np.maximum(inside, 0.0), photo).astype(np.float32)
 
 
-def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray,
-                 candidates: tuple[float, ...]) -> dict:
-    """Fit reflectance and environment scale for each candidate roughness; the best fit."""
+def _fit_candidates(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray,
+                    candidates: tuple[float, ...]) -> dict:
+    """Fit reflectance and environment scale for each candidate roughness: ``{roughness:
+    FitResult}``."""
     from abs.fitting import FitSettings, fit
 
     settings = FitSettings(spp=syn.fit_spp, max_iterations=syn.max_iterations,
@@ -254,13 +338,20 @@ def _fit_current(folder: Path, syn: SynthesisSettings, reflectance0: np.ndarray,
         scene = write_scene_file(folder, f"fit_{roughness:g}.toml",
                                  current_material(reflectance0, roughness), syn.fit_spp,
                                  syn.max_depth)
-        result = fit(scene, folder / "capture", ["material.reflectance", "environment.scale"],
-                     settings)
-        fits[roughness] = result
-    best = min(fits, key=lambda r: fits[r].metrics["train_rmse"]["after"])
-    result = fits[best]
+        fits[roughness] = fit(scene, folder / "capture",
+                              ["material.reflectance", "environment.scale"], settings)
+    return fits
+
+
+def _smallest_residual(fits: dict) -> float:
+    return min(fits, key=lambda r: fits[r].metrics["train_rmse"]["after"])
+
+
+def _summary(fits: dict, roughness: float) -> dict:
+    """The trust record of the fit of ``roughness`` among the candidates' ``fits``."""
+    result = fits[roughness]
     stderr = result.vector.split(result.uncertainty.stderr)
-    return {"roughness": best,
+    return {"roughness": roughness,
             "reflectance": result.values["material.reflectance"].tolist(),
             "reflectance_stderr": stderr["material.reflectance"].tolist(),
             "scale": float(result.values["environment.scale"][0]),
@@ -329,20 +420,40 @@ def fit_photograph(rgb: np.ndarray, mask: np.ndarray, est: Estimates,
         write_mesh(folder, vertices, faces, view["R"], view["t"])
         write_capture(folder / "capture", view, rgb, compared)
         write_environment(folder, environment)
-        trust = _fit_current(folder, syn, _initial_reflectance(rgb, mask, environment),
-                             syn.roughness_candidates)
-        # The unseen part of the map carries the fitted scale; the backdrop is measured radiance.
-        fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
-        if min(syn.light_grid) > 0:
+        fits = _fit_candidates(folder, syn, _initial_reflectance(rgb, mask, environment),
+                               syn.roughness_candidates)
+
+        def explain(roughness: float) -> tuple[dict, np.ndarray]:
+            """The candidate's fit, then the unseen light fitted to it and the fit again under
+            that light: the trust record and the fitted map."""
+            trust = _summary(fits, roughness)
+            # The unseen part of the map carries the fitted scale; the backdrop is measured.
+            fitted_env = np.where(seen[..., None], environment, environment * trust["scale"])
+            if min(syn.light_grid) == 0:
+                return trust, fitted_env
             unseen = _fit_lighting(folder, rgb, compared, view, fitted_env, seen, trust, syn)
             write_environment(folder, np.where(seen[..., None], environment, unseen))
             first = trust
-            trust = _fit_current(folder, syn, np.asarray(first["reflectance"]),
-                                 (first["roughness"],))
+            trust = _summary(_fit_candidates(folder, syn, np.asarray(first["reflectance"]),
+                                             (roughness,)), roughness)
             trust["first_fit"] = {k: first[k] for k in ("residual_rmse", "scale", "reflectance",
                                                         "candidates")}
             trust["lighting"] = first["lighting"]
-            fitted_env = np.where(seen[..., None], environment, unseen * trust["scale"])
+            return trust, np.where(seen[..., None], environment, unseen * trust["scale"])
+
+        trust, fitted_env = explain(_smallest_residual(fits))
+        chosen_by = {"roughness_from": "residual"}
+        if syn.highlight_roughness and len(fits) > 1:
+            # Every candidate under the fitted light and reflectance: what differs is the lobe.
+            choice = _highlight_roughness(rgb, fit_mask(mask), compared, view, vertices, faces,
+                                          trust["reflectance"], fitted_env,
+                                          syn.roughness_candidates, syn)
+            if choice is not None:
+                chosen_by = {"roughness_from": "highlight", "highlight": choice}
+                if choice["roughness"] != trust["roughness"]:
+                    chosen_by["residual_choice"] = trust["roughness"]
+                    trust, fitted_env = explain(choice["roughness"])
+        trust.update(chosen_by)
     level = float(np.mean(luminance(rgb)[mask]))
     trust.update(noise_ratio=trust["residual_rmse"] / max(trust["noise"], 1e-12),
                  relative_residual=trust["residual_rmse"] / max(level, 1e-12),
@@ -379,6 +490,15 @@ def edit_fitted(rgb: np.ndarray, mask: np.ndarray, spec: MaterialSpec, fitted: F
     """Steps 4-5: the edited photograph from a fitted scene (module docstring)."""
     trust = fitted.trust
     differential = spec.kind in KEEPS_SURFACE
+    if differential and "highlight" in trust:
+        # The sun fitted to the highlight lights both renderings: a gloss edit reshapes its
+        # highlight, while its diffuse light (which the smooth light already holds) cancels in
+        # new - current. Edits that replace the surface are rendered without it, where that
+        # diffuse light would count twice.
+        sun = trust["highlight"]
+        fitted = replace(fitted, environment=fitted.environment + np.asarray(
+            sun["sun_irradiance"], np.float32) * sun_map(fitted.environment.shape[0],
+                                                         np.asarray(sun["sun_direction"])))
     current = (render_material(fitted, current_material(trust["reflectance"], trust["roughness"]),
                                syn) if differential else None)
     with tempfile.TemporaryDirectory(prefix="abs-edit-") as tmp:
