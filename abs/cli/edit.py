@@ -104,5 +104,10 @@ def run_edit(args) -> int:
             # A sun's highlight: the fit could not use it, so the light's level rests on the rest.
             print(f"abs edit: {left_out} pixels of a sharp highlight left out of the fit "
                   f"(a sun the smooth fitted light cannot hold)")
+        sun = result.trust.get("highlight")
+        if sun is not None:
+            rmse = ", ".join(f"{r}: {v:.3g}" for r, v in sun["rmse"].items())
+            print(f"abs edit: roughness {result.trust['roughness']:g} from a sun fitted to that "
+                  f"highlight (its RMSE per candidate roughness: {rmse})")
     print(f"abs edit: {result.material} ({args.method}) -> {out}")
     return 0
