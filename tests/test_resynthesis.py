@@ -121,6 +121,20 @@ def test_an_inflated_ellipse_is_the_ellipsoid_poisson_s_equation_gives():
     assert heights.max() == pytest.approx(depth, abs=0.3)
 
 
+def test_a_pinhole_in_the_matte_does_not_dent_the_solid():
+    # Poisson's solution vanishes on every outline: a one-pixel hole left in would pull the
+    # sphere's peak from 37.8 to 30.5 pixels; holes below 1 % of the area are filled first.
+    from abs.resynthesis.inflation import inflation_heights
+
+    ys, xs = np.mgrid[0:100, 0:120]
+    disc = (xs - 60) ** 2 + (ys - 50) ** 2 < 38 ** 2
+    pinholed = disc.copy()
+    pinholed[50, 70] = False
+    np.testing.assert_allclose(inflation_heights(pinholed), inflation_heights(disc), atol=1e-9)
+    ring = disc & ((xs - 60) ** 2 + (ys - 50) ** 2 > 12 ** 2)  # a real hole (10 % of it) stays
+    assert inflation_heights(ring)[50, 60] == 0.0
+
+
 def test_an_inflated_disc_shades_like_a_sphere():
     # What the renderer sees are the vertex normals. A disc off the pixel grid, as a photograph's
     # is: the smoothed sub-pixel outline and the lift along the central ray keep them within a
@@ -380,7 +394,8 @@ def sun_lit_coating(alpha: float, width: int = 96, height: int = 72, spp: int = 
             "diffuse_reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
     scene = mi.load_dict({"type": "scene", "s": {
         "type": "sphere", "radius": 0.05, "center": [0.0, 0.0, 0.35], "bsdf": bsdf}})
-    light = Environment(SUN_IRRADIANCE * sun_map(256, SUN))
+    # A finer map than the fit's suns (256 rows): the irradiance must carry across sizes.
+    light = Environment(SUN_IRRADIANCE * sun_map(512, SUN))
     image = np.asarray(PathTracer(max_depth=4).render(scene, light, camera, spp, seed=1),
                        np.float32)
     idx = dr.arange(mi.UInt32, width * height)
@@ -396,22 +411,31 @@ SUN = np.array([0.35, 0.45, -0.82]) / np.linalg.norm([0.35, 0.45, -0.82])
 
 
 def test_a_sun_map_holds_unit_irradiance_at_any_size():
-    from abs.editing.environment import latlong_directions
+    # Integrated as the renderer reads the map (abs.render.environment.Environment.eval, its
+    # bilinear lookup), by quadrature at 8 points per texel over the rows around the sun: 1 at
+    # any map size and direction, the poles' half texels included.
+    import mitsuba as mi
+
+    from abs.render.environment import Environment
     from abs.resynthesis.highlight import sun_map
 
-    for height in (64, 256, 540):
-        latlong = sun_map(height, SUN)
-        theta = np.pi * np.arange(height) / (height - 1)
-        d_theta = np.full(height, np.pi / (height - 1))
-        d_theta[[0, -1]] /= 2
-        solid_angle = 2 * np.pi / (2 * height) * d_theta * np.maximum(np.sin(theta),
-                                                                      np.sin(d_theta / 2))
-        assert (latlong[..., 0] * solid_angle[:, None]).sum() == pytest.approx(1.0, rel=1e-6)
-        # ... where the direction points: its texels' directions average to it.
-        dirs = latlong_directions(height, 2 * height)
-        weights = latlong[..., 0] * solid_angle[:, None]
-        mean = (dirs * weights[..., None]).sum(axis=(0, 1))
-        assert np.degrees(np.arccos(mean @ SUN / np.linalg.norm(mean))) < 180 / height
+    near_pole = np.array([np.sin(0.004), np.cos(0.004), 0.0])
+    for height in (64, 540):
+        for direction in (SUN, near_pole):
+            latlong = sun_map(height, direction)
+            d_theta = np.pi / (height - 1)
+            theta_sun = np.arccos(direction[1])
+            n = 8
+            theta = np.arange(max(theta_sun - 3 * d_theta, 0.0),
+                              min(theta_sun + 3 * d_theta, np.pi), d_theta / n) + d_theta / (2 * n)
+            phi = (np.arange(2 * height * n) + 0.5) * np.pi / (height * n)
+            t, f = np.meshgrid(theta, phi, indexing="ij")
+            dirs = np.stack([np.sin(t) * np.sin(f), np.cos(t), -np.sin(t) * np.cos(f)], axis=-1)
+            value = Environment(latlong).eval(mi.Vector3f(
+                *[mi.Float(dirs[..., k].ravel().astype(np.float32)) for k in range(3)]))
+            radiance = np.asarray(value.x).reshape(t.shape)
+            total = (radiance * np.sin(t)).sum() * (d_theta / n) * (np.pi / (height * n))
+            assert total == pytest.approx(1.0, abs=0.02), (height, direction, total)
 
 
 @pytest.fixture(scope="module")
@@ -432,24 +456,25 @@ def highlight_fit():
 def test_a_highlight_tells_the_roughness_and_where_the_sun_is(highlight_fit):
     # What the smooth model leaves of a sun's highlight (here the highlight alone, a bare
     # coating under a lone sun) is reproduced best by the lobe of the true roughness on the
-    # inflated mesh, and the fitted sun is the true one (highlight module). Measured: highlight
-    # RMSE 0.69 / 0.52 / 0.90 / 1.18 for GGX 0.02 / 0.05 / 0.1 / 0.2 (true 0.05); the sun
-    # 1.2 degrees off, its irradiance 35.8 for 40.
+    # inflated mesh, and the fitted sun is the true one (highlight module), though the
+    # photograph's sun is a map twice as fine as the fit's. Measured: highlight RMSE 0.70 / 0.41 /
+    # 0.86 / 1.36 for GGX 0.02 / 0.05 / 0.1 / 0.2 (true 0.05); the sun 0.9 degrees off, its
+    # irradiance 41.5 for 40 (path-traced suns of a few texels instead: 0.02 chosen, 19.9).
     *_, choice, _ = highlight_fit
     assert choice is not None and choice["pixels"] >= 4
     assert choice["roughness"] == 0.05
     rmse = choice["rmse"]
-    assert rmse["0.05"] < 0.85 * min(rmse["0.02"], rmse["0.1"])
+    assert rmse["0.05"] < 0.7 * min(rmse["0.02"], rmse["0.1"])
     found = np.asarray(choice["sun_direction"])
     assert np.degrees(np.arccos(np.clip(found @ SUN, -1.0, 1.0))) < 2.0
-    np.testing.assert_allclose(choice["sun_irradiance"], SUN_IRRADIANCE, rtol=0.2)
+    np.testing.assert_allclose(choice["sun_irradiance"], SUN_IRRADIANCE, rtol=0.1)
 
 
 def test_a_gloss_edit_reshapes_the_sun_s_highlight(highlight_fit):
     # The fitted sun lights both renderings of a gloss edit (method.edit_fitted), so the
     # highlight sharpens as the truth's does; without the sun the edit leaves it as
-    # photographed. Measured: RMSE to the truth over the object 1.42 with the sun, 2.45
-    # without (the photograph's own); the highlight's peak 70 for the truth's 118 (photograph 32).
+    # photographed. Measured: RMSE to the truth over the object 1.02 with the sun, 2.06
+    # without (the photograph's own); the highlight's peak 68 for the truth's 81 (photograph 37).
     from abs.resynthesis.method import FittedScene
 
     image, mask, view, vertices, faces, choice, settings = highlight_fit
@@ -465,8 +490,7 @@ def test_a_gloss_edit_reshapes_the_sun_s_highlight(highlight_fit):
         dataclasses.replace(fitted, trust={k: v for k, v in trust.items() if k != "highlight"}),
         settings)
     rmse = lambda a: float(np.sqrt(np.mean((a - truth)[inner] ** 2)))  # noqa: E731
-    np.testing.assert_allclose(without, image, atol=1e-6)
-    assert rmse(edited) < 0.7 * rmse(image)
+    assert rmse(edited) < 0.7 * rmse(without)
 
 
 # ------------------------------------------------------------------------------ API, errors

@@ -105,7 +105,7 @@ def run_edit(args) -> int:
             print(f"abs edit: {left_out} pixels of a sharp highlight left out of the fit "
                   f"(a sun the smooth fitted light cannot hold)")
         sun = result.trust.get("highlight")
-        if sun is not None:
+        if sun is not None and result.trust.get("roughness_from") == "highlight":
             rmse = ", ".join(f"{r}: {v:.3g}" for r, v in sun["rmse"].items())
             print(f"abs edit: roughness {result.trust['roughness']:g} from a sun fitted to that "
                   f"highlight (its RMSE per candidate roughness: {rmse})")

@@ -11,11 +11,13 @@ Here a sun is fitted to what the smooth model leaves of the highlight, once per 
 roughness, and the candidate whose lobe reproduces it best wins:
 
 - the residual ``photo - current``, ``current`` the fitted plastic of that roughness rendered
-  under the fitted light, is compared over the object's inner pixels with ``a * S``, ``S`` a
-  rendering of the coating alone (reflectance 0, the same roughness) lit by a sun of unit
-  irradiance in direction ``w``, and ``a >= 0`` the sun's irradiance per colour channel (least
-  squares, closed form). The coating alone, because the sun's diffuse light is already in the
-  residual's smooth part (the smooth light absorbed it);
+  under the fitted light, is compared over the object's inner pixels with ``a * S``, ``S`` the
+  bare coating (reflectance 0, the same roughness) lit by a directional sun of unit irradiance
+  from ``w``, and ``a >= 0`` the sun's irradiance per colour channel (least squares, closed
+  form). The coating alone, because the sun's diffuse light is already in the residual's smooth
+  part (the smooth light absorbed it). ``S`` is evaluated (one BSDF evaluation and shadow ray
+  per sub-pixel hit), not path traced: a path-traced sun of a few texels sparkles, and the
+  sparkles decided the comparison (``abs.resynthesis.method._coating_under_sun``);
 - ``w`` starts at the mirror direction of the highlight's brightest pixel on the inflated mesh
   and is refined on 3 x 3 grids of tangent offsets, halving the step
   (:data:`DIRECTION_STEPS_RAD`), each centred on the best so far.
@@ -92,15 +94,18 @@ def sun_map(height: int, direction: np.ndarray) -> np.ndarray:
     latlong = np.zeros((height, width, 3), np.float32)
     c0, r0 = int(np.floor(col)), int(np.floor(row))
     fc, fr = col - c0, row - r0
+    d_theta = np.pi / (height - 1)
     for dr, wr in ((0, 1 - fr), (1, fr)):
         for dc, wc in ((0, 1 - fc), (1, fc)):
             r = min(r0 + dr, height - 1)
-            # A row's texels span pi / (H - 1) in theta (half that at the poles) and 2 pi / W in
-            # phi.
-            theta = np.pi * r / (height - 1)
-            d_theta = np.pi / (height - 1) * (0.5 if r in (0, height - 1) else 1.0)
-            solid_angle = (2 * np.pi / width) * d_theta * max(np.sin(theta), np.sin(d_theta / 2))
-            latlong[r, (c0 + dc) % width] += wr * wc / solid_angle
+            # The solid angle a texel carries under the renderer's bilinear lookup (rows at
+            # theta = pi j / (H - 1), columns 2 pi / W apart): its tent integrated against
+            # sin(theta) dtheta dphi; at a pole only the inner half of the tent exists.
+            if r in (0, height - 1):
+                weight = 1.0 - np.sin(d_theta) / d_theta
+            else:
+                weight = 2.0 * (1.0 - np.cos(d_theta)) / d_theta * np.sin(np.pi * r / (height - 1))
+            latlong[r, (c0 + dc) % width] += wr * wc / (2.0 * np.pi / width * weight)
     return latlong
 
 

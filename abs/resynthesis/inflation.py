@@ -19,9 +19,10 @@ true ellipsoid's, now 0.1). Square roots of Poisson solutions as inflation: e.g.
 ``phi`` is solved by the method of fundamental solutions: ``phi = -|x - c|^2 / 4 + w`` with ``w``
 harmonic, a sum of ``log |x - s_k|`` over sources ``s_k`` placed outside the outline (along its
 outward normals) plus a constant, fitted by least squares to ``w = |x - c|^2 / 4`` at dense points
-of the outline. This keeps ``phi = 0`` on the smoothed sub-pixel outline (below) to a small
-fraction of a pixel, which the steep profile near the outline needs, and ``phi`` is smooth
-everywhere inside, holes and several components included.
+of the outline. This keeps ``phi`` near 0 on the smoothed sub-pixel outline (below: a least-squares
+fit, within a small fraction of a pixel in the outline's position), which the steep profile near
+the outline needs, and ``phi`` is smooth everywhere inside, several components and holes included
+(holes below :data:`SMALL_HOLE_FRACTION` of the area are filled first: a matte's pinholes).
 
 Two details decide whether the inflated sphere shades like a sphere (measured on
 ``benchmarks/material_edit.py``'s photograph of a sphere, rendered under the true light with the
@@ -51,24 +52,32 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["OUTLINE_SIGMA_PX", "inflation_heights", "inflated_mesh"]
+__all__ = ["OUTLINE_SIGMA_PX", "SMALL_HOLE_FRACTION", "fill_small_holes", "inflation_heights",
+           "inflated_mesh"]
 
 OUTLINE_SIGMA_PX = 2.0
 """Default smoothing of the outline along its length, pixels (a Gaussian's sd)."""
+
+SMALL_HOLE_FRACTION = 0.01
+"""Holes in the mask smaller than this fraction of its area are filled before inflating: a matte's
+pinholes, not the object's (Poisson's solution vanishes on every outline, so a one-pixel hole
+would pull the whole solid down around it)."""
 
 _OUTLINE_SPACING_PX = 0.1  # the smoothed outline resampled this densely: point distance = segment
 # distance to within spacing^2 / (8 d), far below a pixel.
 
 
-def _outline_points(mask: np.ndarray, sigma_px: float) -> np.ndarray:
-    """Dense points on the mask's smoothed 0.5 iso-lines, pixel coordinates ``(row, col)``."""
+def _outline_lines(mask: np.ndarray, sigma_px: float) -> list[np.ndarray]:
+    """Dense points on each of the mask's smoothed 0.5 iso-lines (closed, in order), pixel
+    coordinates ``(row, col)``."""
     from skimage import measure
 
     padded = np.pad(np.asarray(mask, float), 1)  # every outline closed
     points = []
     for line in measure.find_contours(padded, 0.5):
         line = line[:-1] - 1.0  # closed: the last point repeats the first; back to mask pixels
-        if sigma_px > 0 and len(line) > 4:
+        # A Gaussian over a line much shorter than its window would shrink it to a point.
+        if sigma_px > 0 and len(line) > 6 * sigma_px:
             # The iso-line's vertices are 0.7-1 pixel apart: a Gaussian over vertices is about
             # one over pixels.
             line = ndimage.gaussian_filter1d(line, sigma_px, axis=0, mode="wrap")
@@ -78,12 +87,18 @@ def _outline_points(mask: np.ndarray, sigma_px: float) -> np.ndarray:
         t = np.concatenate([np.arange(n) / n for n in steps])
         start = np.repeat(line, steps, axis=0)
         points.append(start + t[:, None] * (np.repeat(nxt, steps, axis=0) - start))
-    return np.concatenate(points)
+    return points
+
+
+def _outline_points(mask: np.ndarray, sigma_px: float) -> np.ndarray:
+    """All of :func:`_outline_lines`'s points in one array."""
+    return np.concatenate(_outline_lines(mask, sigma_px))
 
 
 def _outward_normals(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Unit normals of consecutive outline ``points`` ``(row, col)``, pointing out of ``mask``."""
-    tangent = np.gradient(points, axis=0)
+    """Unit normals of one closed outline's consecutive ``points`` ``(row, col)``, pointing out
+    of ``mask``."""
+    tangent = 0.5 * (np.roll(points, -1, axis=0) - np.roll(points, 1, axis=0))
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=1)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     # The side where the signed distance to the mask grows is outside.
@@ -109,6 +124,17 @@ def _room_outside(points: np.ndarray, normals: np.ndarray, mask: np.ndarray,
     return room
 
 
+def fill_small_holes(mask: np.ndarray) -> np.ndarray:
+    """``mask`` with its holes smaller than :data:`SMALL_HOLE_FRACTION` of its area filled."""
+    m = np.asarray(mask, bool)
+    holes, count = ndimage.label(ndimage.binary_fill_holes(m) & ~m)
+    if count == 0:
+        return m
+    sizes = ndimage.sum(np.ones_like(m), holes, index=np.arange(1, count + 1))
+    small = np.flatnonzero(sizes < SMALL_HOLE_FRACTION * m.sum()) + 1
+    return m | np.isin(holes, small)
+
+
 def inflation_heights(mask: np.ndarray, outline_sigma_px: float = OUTLINE_SIGMA_PX) -> np.ndarray:
     """Heights of the pixel corners above the silhouette's plane, pixels.
 
@@ -126,24 +152,29 @@ def inflation_heights(mask: np.ndarray, outline_sigma_px: float = OUTLINE_SIGMA_
         ``(height + 1, width + 1)`` heights at the pixel corners (corner ``(j, i)`` is the top-left
         corner of pixel ``(j, i)``); 0 on the outline and outside, ``sqrt(4 phi)`` inside, ``phi``
         the solution of ``-laplacian(phi) = 1`` vanishing on the smoothed outline (module
-        docstring).
+        docstring). Holes smaller than :data:`SMALL_HOLE_FRACTION` of the mask are filled.
     """
-    m = np.pad(np.asarray(mask, bool), 1)
+    mask = fill_small_holes(mask)
+    m = np.pad(mask, 1)
     # A corner is inside when all four pixels around it are in the mask.
     inside = m[:-1, :-1] & m[:-1, 1:] & m[1:, :-1] & m[1:, 1:]
     heights = np.zeros(inside.shape)
     if not inside.any():
         return heights
-    outline = _outline_points(mask, outline_sigma_px)  # every 0.1 pixel
-    perimeter = len(outline) * _OUTLINE_SPACING_PX
-    # About a source per pixel of outline (a few hundred at most: the solution is smooth), four
-    # collocation points per source.
-    n_sources = int(np.clip(perimeter, 32, 400))
-    sites = outline[np.linspace(0, len(outline), n_sources, endpoint=False).astype(int)]
-    normals = _outward_normals(sites, mask)
+    lines = _outline_lines(mask, outline_sigma_px)  # every 0.1 pixel
+    outline = np.concatenate(lines)
+    # About a source per pixel of outline (a few hundred at most: the solution is smooth), shared
+    # among the outlines by length; four collocation points per source.
+    n_total = int(np.clip(len(outline) * _OUTLINE_SPACING_PX, 32, 400))
     size = np.sqrt(np.count_nonzero(mask) / np.pi)  # the equivalent disc's radius, pixels
-    sources = sites + 0.5 * _room_outside(sites, normals, mask, size)[:, None] * normals
-    collocation = outline[np.linspace(0, len(outline), 4 * n_sources, endpoint=False).astype(int)]
+    sources, collocation = [], []
+    for line in lines:
+        n = max(4, round(n_total * len(line) / len(outline)))
+        sites = line[np.linspace(0, len(line), n, endpoint=False).astype(int)]
+        normals = _outward_normals(sites, mask)
+        sources.append(sites + 0.5 * _room_outside(sites, normals, mask, size)[:, None] * normals)
+        collocation.append(line[np.linspace(0, len(line), 4 * n, endpoint=False).astype(int)])
+    sources, collocation = np.concatenate(sources), np.concatenate(collocation)
     centre = outline.mean(axis=0)
 
     def basis(x: np.ndarray) -> np.ndarray:
@@ -158,7 +189,10 @@ def inflation_heights(mask: np.ndarray, outline_sigma_px: float = OUTLINE_SIGMA_
     coef = np.linalg.lstsq(A / scale, -particular(collocation), rcond=None)[0] / scale
     jj, ii = np.nonzero(inside)
     corners = np.stack([jj - 0.5, ii - 0.5], axis=1)  # corner (j, i) at (j-0.5, i-0.5)
-    phi = particular(corners) + basis(corners) @ coef
+    phi = np.empty(len(corners))
+    for k in range(0, len(corners), 4096):  # bounded memory: corners x sources at a time
+        chunk = corners[k:k + 4096]
+        phi[k:k + 4096] = particular(chunk) + basis(chunk) @ coef
     heights[jj, ii] = np.sqrt(np.clip(4.0 * phi, 0.0, None))
     return heights
 
@@ -188,7 +222,7 @@ def inflated_mesh(mask: np.ndarray, K: np.ndarray, distance: float, relief: floa
     faces : np.ndarray
         ``(m, 3)`` int64, counter-clockwise seen from outside (normals point out).
     """
-    pm = np.asarray(mask, bool)
+    pm = fill_small_holes(mask)  # the solid is whole there; the matte still composites
     h_px = inflation_heights(pm, outline_sigma_px) * relief
     rows, cols = h_px.shape
     # Corner (j, i) sits at pixel coordinates (i - 0.5, j - 0.5).

@@ -1,8 +1,8 @@
 """Scene-file materials of the analysis-by-synthesis edit: the current one and the targets.
 
 The current material is ``plastic`` (a diffuse base under a GGX-rough coating): its reflectance
-is fitted, its roughness chosen among candidates by the fit residual
-(:mod:`~abs.resynthesis.method`).
+is fitted, its roughness chosen among candidates by a sun's highlight where there is one
+(:mod:`~abs.resynthesis.highlight`), else by the fit residual (:mod:`~abs.resynthesis.method`).
 A target is made from the fitted current material where the spec leaves a quantity open:
 
 ============================  ====================================================================
