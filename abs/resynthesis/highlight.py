@@ -22,14 +22,16 @@ roughness, and the candidate whose lobe reproduces it best wins:
   and is refined on 3 x 3 grids of tangent offsets, halving the step
   (:data:`DIRECTION_STEPS_RAD`), each centred on the best so far.
 
-On ``benchmarks/material_edit.py``'s blue ellipsoid (GGX 0.05, the sun of pedestrian_overpass)
-this chose 0.05 on three seeds out of 0.05 / 0.1 / 0.2 (highlight RMSE 0.110 / 0.119 / 0.301,
-0.097 / 0.196 / 0.349 and 0.099 / 0.109 / 0.410), where the residual rule had chosen 0.1, 0.2
-and 0.05; the fitted sun lay 2.8 to 4.5 degrees from the map's, its colour the map's sun's
-(1 : 0.51 : 0.11), its irradiance 1.3 to 1.8 times it. An earlier form of this test
-(2026-11-27, a blob sun on the mesh inflated by the distance to the outline, a capsule for that
-ellipse) had preferred 0.1: the highlight's spread is curvature and roughness together, so this
-needs the shape Poisson's inflation gives (:mod:`~abs.resynthesis.inflation`).
+On ``benchmarks/material_edit.py``'s blue ellipsoid (GGX 0.05, the sun of pedestrian_overpass;
+photographs at 256 spp) this chose 0.05 on three seeds out of 0.05 / 0.1 / 0.2 (highlight RMSE
+0.103 / 0.110 / 0.341, 0.094 / 0.100 / 0.273 and 0.104 / 0.107 / 0.304: 0.1 close behind), where
+the residual rule chose 0.05, 0.2 and 0.2; the fitted sun lay 6-7 degrees from the map's, of its
+colour (1 : 0.51 : 0.10), 1.1 to 1.4 times its irradiance. With the benchmark's photographs at
+64 spp one seed of three chose 0.1 (0.115 / 0.063 / 0.248): the photograph's highlight was itself
+sparkling Monte-Carlo noise. An earlier form of this test (2026-11-27, a blob sun on the mesh
+inflated by the distance to the outline, a capsule for that ellipse) had preferred 0.1: the
+highlight's spread is curvature and roughness together, so this needs the shape Poisson's
+inflation gives (:mod:`~abs.resynthesis.inflation`).
 
 The fitted sun also lights both renderings of a gloss edit (:func:`abs.resynthesis.method.
 edit_fitted`): in ``photo + new - current`` its diffuse light cancels and its highlight takes the
