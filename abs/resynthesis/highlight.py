@@ -17,7 +17,9 @@ roughness, and the candidate whose lobe reproduces it best wins:
   form). The coating alone, because the sun's diffuse light is already in the residual's smooth
   part (the smooth light absorbed it). ``S`` is evaluated (one BSDF evaluation and shadow ray
   per sub-pixel hit), not path traced: a path-traced sun of a few texels sparkles, and the
-  sparkles decided the comparison (``abs.resynthesis.method._coating_under_sun``);
+  sparkles decided the comparison (``abs.resynthesis.method._coating_under_sun``). The sun is a
+  direction, the real one half a degree wide: a finer lobe than the true one may fit a little
+  better, which the candidates' spacing (factors of 2) leaves room for;
 - ``w`` starts at the mirror direction of the highlight's brightest pixel on the inflated mesh
   and is refined on 3 x 3 grids of tangent offsets, halving the step
   (:data:`DIRECTION_STEPS_RAD`), each centred on the best so far.

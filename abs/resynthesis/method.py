@@ -105,7 +105,8 @@ class SynthesisSettings:
         that sun reproduces it (:mod:`~abs.resynthesis.highlight`), not by the residual of the
         rest, and light gloss edits with it (with one candidate roughness: only the latter).
     sun_spp : int
-        Samples per pixel of that test's renderings.
+        Samples per pixel of that test's renderings of the current material under the fitted
+        light (the sun's own are evaluated, not sampled).
     seed : int
         Seed of the renders.
     folder : str or None
