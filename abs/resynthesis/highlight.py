@@ -158,8 +158,9 @@ def fit_sun(residual: np.ndarray, render: Callable[[np.ndarray], np.ndarray],
     residual : np.ndarray
         ``(n, 3)`` what the smooth model leaves of the photograph over the compared pixels.
     render : callable
-        ``render(direction) -> (n, 3)``: the same pixels of a rendering lit by a unit sun
-        (:func:`sun_map`) in world ``direction``.
+        ``render(direction) -> (n, 3)``: the same pixels lit by a sun of unit irradiance from
+        world ``direction`` (the irradiance :func:`sun_map` holds, so that the fitted value goes
+        into a map unchanged).
     start : np.ndarray
         ``(3,)`` the first direction (:func:`mirror_direction`).
     """
