@@ -39,7 +39,6 @@ def sphere_photo(spp: int = 256, alpha: float = 0.1,
                  checkered: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Plastic sphere (radius 5 cm, 35 cm ahead, GGX ``alpha``) in uniform light ``RADIANCE``;
     ``checkered``: its reflectance a checkerboard of ``REFLECTANCE`` and half of it."""
-    import drjit as dr
     import mitsuba as mi
 
     from abs.render.camera import Camera
@@ -58,10 +57,18 @@ def sphere_photo(spp: int = 256, alpha: float = 0.1,
     scene = mi.load_dict({"type": "scene", "s": {"type": "sphere", "radius": 0.05, "bsdf": bsdf}})
     env = Environment(np.full((16, 32, 3), RADIANCE, np.float32))
     photo = np.asarray(PathTracer(max_depth=12).render(scene, env, camera, spp, seed=1), np.float32)
-    idx = dr.arange(mi.UInt32, W * H)
-    origin, d = camera.rays(mi.Float(idx % W), mi.Float(idx // W))
-    mask = np.asarray(scene.ray_intersect(mi.Ray3f(origin, d)).is_valid(), bool).reshape(H, W)
-    return photo, mask
+    return photo, coverage(scene, camera)
+
+
+def coverage(scene, camera) -> np.ndarray:
+    """``(height, width)`` bool: the pixels whose centre's ray hits ``scene``."""
+    import drjit as dr
+    import mitsuba as mi
+
+    w, h = camera.width, camera.height
+    idx = dr.arange(mi.UInt32, w * h)
+    origin, d = camera.rays(mi.Float(idx % w), mi.Float(idx // w))
+    return np.asarray(scene.ray_intersect(mi.Ray3f(origin, d)).is_valid(), bool).reshape(h, w)
 
 
 SETTINGS = SynthesisSettings(fov_deg=FOV, roughness_candidates=(0.1,), light_grid=(0, 0),
@@ -198,7 +205,6 @@ def test_a_sun_s_highlight_does_not_pull_the_fit(tmp_path):
     # 0.06, 0, 0: the least squares spend the light on the highlight).
     import dataclasses
 
-    import drjit as dr
     import mitsuba as mi
 
     from abs.render.camera import Camera
@@ -214,9 +220,7 @@ def test_a_sun_s_highlight_does_not_pull_the_fit(tmp_path):
     sky[20:22, 40:42] = 3000.0
     photo = np.asarray(PathTracer(max_depth=12).render(scene, Environment(sky), camera, 256,
                                                        seed=1), np.float32)
-    idx = dr.arange(mi.UInt32, W * H)
-    origin, d = camera.rays(mi.Float(idx % W), mi.Float(idx // W))
-    mask = np.asarray(scene.ray_intersect(mi.Ray3f(origin, d)).is_valid(), bool).reshape(H, W)
+    mask = coverage(scene, camera)
     settings = dataclasses.replace(SETTINGS, light_grid=(7, 8))
     est = estimate(photo, mask, EditSettings())
     kept = resynthesis.fit_photograph(photo, mask, est, settings).trust
@@ -379,7 +383,6 @@ def sun_lit_coating(alpha: float, width: int = 96, height: int = 72, spp: int = 
     sun of irradiance ``SUN_IRRADIANCE`` in ``SUN``: the highlight alone, as the photograph's
     camera (``photo_camera``: at the origin, looking along world +z) sees it. Returns the image,
     its mask and the camera's view."""
-    import drjit as dr
     import mitsuba as mi
 
     from abs.render.camera import Camera
@@ -398,11 +401,7 @@ def sun_lit_coating(alpha: float, width: int = 96, height: int = 72, spp: int = 
     light = Environment(SUN_IRRADIANCE * sun_map(512, SUN))
     image = np.asarray(PathTracer(max_depth=4).render(scene, light, camera, spp, seed=1),
                        np.float32)
-    idx = dr.arange(mi.UInt32, width * height)
-    origin, d = camera.rays(mi.Float(idx % width), mi.Float(idx // width))
-    mask = np.asarray(scene.ray_intersect(mi.Ray3f(origin, d)).is_valid(), bool).reshape(
-        height, width)
-    return image, mask, view
+    return image, coverage(scene, camera), view
 
 
 SUN_IRRADIANCE = 40.0

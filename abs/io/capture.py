@@ -557,6 +557,14 @@ def load_capture(folder: str | Path) -> Capture:
 # Saving
 
 
+def _json_map(key: str, entries: Mapping[str, Any]) -> str:
+    """A top-level object of ``cameras.json`` keyed by view name, one view per line, as it
+    follows the ``views`` list."""
+    lines = ",\n".join(f"    {json.dumps(name)}: {json.dumps(value)}"
+                        for name, value in entries.items())
+    return f',\n  "{key}": {{\n' + lines + "\n  }"
+
+
 def _json_view(view: View, folder: Path) -> str:
     """One view as compact JSON, one key per line and matrices row by row."""
     def rel(path: Path) -> str:
@@ -736,13 +744,10 @@ def save_capture(folder: str | Path, views: Sequence[View | Mapping[str, Any]],
         # Only when there is a blur: captures without one stay as every reader knows them.
         text += f',\n  "blur_px": {json.dumps(list(blur_px))}'
     if processing:
-        entries = ",\n".join(f"    {json.dumps(name)}: {json.dumps(p.to_json())}"
-                             for name, p in processing.items())
-        text += ',\n  "processing": {\n' + entries + "\n  }"
+        text += _json_map("processing", {name: p.to_json() for name, p in processing.items()})
     if any(v.noise is not None for v in saved):
-        entries = ",\n".join(f"    {json.dumps(v.name)}: {json.dumps(f'noise/{v.noise.name}')}"
-                              for v in saved if v.noise is not None)
-        text += ',\n  "noise": {\n' + entries + "\n  }"
+        text += _json_map("noise", {v.name: f"noise/{v.noise.name}" for v in saved
+                                    if v.noise is not None})
     text += "\n}\n"
     tmp = folder / f".{CAMERAS_FILE}.tmp"
     tmp.write_text(text, encoding="utf-8")

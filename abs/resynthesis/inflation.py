@@ -90,11 +90,6 @@ def _outline_lines(mask: np.ndarray, sigma_px: float) -> list[np.ndarray]:
     return points
 
 
-def _outline_points(mask: np.ndarray, sigma_px: float) -> np.ndarray:
-    """All of :func:`_outline_lines`'s points in one array."""
-    return np.concatenate(_outline_lines(mask, sigma_px))
-
-
 def _outward_normals(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Unit normals of one closed outline's consecutive ``points`` ``(row, col)``, pointing out
     of ``mask``."""
