@@ -280,6 +280,7 @@ def run_case(case: Case, work: Path, args) -> dict:
             "holdout_rmse": summary["holdout_rmse"], "image_noise": summary["image_noise"],
             "renders": summary["renders"], "fit_wall_s": time.perf_counter() - start,
             "starts": summary.get("starts"), "difference_steps": summary.get("difference_steps"),
+            "polish": summary.get("polish"),
             "trace": [{"iteration": h["iteration"], "loss": h["loss"], "values": h["values"]}
                       for h in result.history],
             "settings": {**shape, "fit": dataclasses.asdict(settings)}}
@@ -338,7 +339,8 @@ def main() -> None:
     for case in chosen:
         if case.name in finished:
             continue
-        print(f"{case.name}: rendering the capture with plain Mitsuba, then fitting", flush=True)
+        print(f"{case.name}: the capture rendered with plain Mitsuba (unless cached in --work), "
+              "then the fit", flush=True)
         done.append(run_case(case, args.work, args))
         args.results.parent.mkdir(parents=True, exist_ok=True)
         args.results.write_text(json.dumps(done, indent=2))

@@ -229,11 +229,11 @@ def main() -> None:
     def per_channel(seed: int) -> np.ndarray:
         image = np.zeros((h, w, 3))
         for c in range(3):
-            sampler, ray, _ = tracer._camera_rays(camera, spp, seed * 3 + c)
+            sampler, ray, _, _, film = tracer._camera_rays(camera, spp, seed * 3 + c)
             ray.time = mi.Float(float(c))  # the whole path carries channel c
             radiance, _ = tracer.trace(scene, env, ray, sampler, split=False)
             dr.eval(radiance)
-            image[..., c] = tracer._film(radiance, w, h, spp).numpy()[..., c]
+            image[..., c] = tracer._film(radiance, camera, spp, film).numpy()[..., c]
         return image
 
     def split(seed: int) -> np.ndarray:

@@ -114,6 +114,25 @@ def test_several_starts_choose_the_fit_start_and_survive_a_resume(small_scene_di
         chosen["end"]["environment.scale"])
 
 
+def test_polish_is_reported_and_its_value_is_the_fits(small_scene_dir, capture, tmp_path, capsys):
+    """``--polish-spp``: the IOR's last parabola is in fit.json (public contract), printed, and
+    its value is the one reported and written to the fitted scene."""
+    out = tmp_path / "fit"
+    assert main(["fit", str(small_scene_dir / "scene.toml"), str(capture), "--out", str(out),
+                 "--params", "glass.ior,environment.scale", "--tie", "glass.ior", "--init",
+                 "glass.ior=1.52,1.52,1.52", "--spp", "8", "--eval-spp", "8", "--max-iterations", "2",
+                 "--refinement-steps", "2", "--polish-spp", "16", "--polish-pairs", "2",
+                 "--no-report"]) == 0
+    summary = json.loads((out / "fit.json").read_text())
+    (entry,) = summary["polish"]
+    assert entry["name"] == "glass.ior" and entry["component"] == 0 and entry["spp"] == 16
+    assert entry["offset"] == pytest.approx(0.2 * 0.02) and len(entry["vertices"]) == 2
+    assert set(entry["slopes"]) == {"environment.scale"}
+    assert summary["parameters"]["glass.ior"]["value"] == [pytest.approx(entry["value"])] * 3
+    assert load_scene(out / "scene.toml").materials["glass"].ior_rgb[0] == pytest.approx(entry["value"])
+    assert f"polish of glass.ior[0]: {entry['start']:.6g} -> {entry['value']:.6g}" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize("starts", ["environment.scale", "environment.scale=", "=1,2",
                                     "environment.scale=1,x", "environment.scale=nan"])
 def test_bad_starts_are_named(small_scene_dir, capture, tmp_path, capsys, starts):

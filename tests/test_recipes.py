@@ -59,6 +59,7 @@ def test_glass_recipe_takes_four_times_the_samples_on_a_gpu(monkeypatch):
     cpu = recipe.settings()  # this machine: the LLVM (CPU) variant
     # The CPU finds the basin at 64 spp and refines at 256 (the glass suite's framed bowl).
     assert cpu.spp == 64 and cpu.refinement_spp == 256 and cpu.refinement_steps == 12
+    assert cpu.polish_spp == 1024 and cpu.polish_pairs == 3
     monkeypatch.setattr(recipe, "current_backend", lambda: "cuda")
     cuda = recipe.settings()
     assert cuda.spp == 256 and cuda.glass_spp_factor == 4 and cuda.tie == ("glass.ior",)

@@ -59,6 +59,13 @@ def add_parser(sub) -> None:
                    help="central-difference steps of parameters that take their derivative so (an "
                         "IOR): 'auto' chooses each from a pilot of its Jacobian column; "
                         "glass.ior=0.04 gives it; default: the parameter's own")
+    p.add_argument("--polish-spp", type=int, default=None, metavar="SPP",
+                   help="after the optimiser, a last parabola along the objective itself for "
+                        "parameters whose derivative is a central difference (an IOR), rendered "
+                        "at SPP samples per pixel; default: none")
+    p.add_argument("--polish-pairs", type=int, default=2,
+                   help="with --polish-spp: seed pairs the polish averages (their scatter is its "
+                        "Monte-Carlo error); default 2")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.json")
     p.add_argument("--no-report", action="store_true", help="skip the HTML report")
     p.set_defaults(run=run)
@@ -106,13 +113,14 @@ def run(args) -> int:
         downsample_schedule=parse_schedule(args.downsample_schedule), eval_spp=args.eval_spp,
         seed=args.seed, tie=tuple(args.tie), reweight=not args.no_reweight, starts=starts,
         glass_spp_factor=args.glass_spp_factor, difference_steps=steps,
-        refinement_spp=args.refinement_spp)
+        refinement_spp=args.refinement_spp, polish_spp=args.polish_spp,
+        polish_pairs=args.polish_pairs)
     scene = load_scene(args.scene)
     names = [n.strip() for n in args.params.split(",") if n.strip()] if args.params else None
     initial = _initial(args.init)
     # Extending a fit (more iterations) is a resume, not a different fit.
     identity = run_identity(scene, args.capture, names or scene.fit_parameters, settings, initial=initial,
-                            drop=("max_iterations", "refinement_steps"))
+                            drop=("max_iterations", "refinement_steps", "polish_spp", "polish_pairs"))
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
     resume = None

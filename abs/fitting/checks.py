@@ -8,7 +8,8 @@ no glass; a fit there found a wrong basin), a parameter that the renders' Monte-
 than the photographs moved (its refinement steps cut to the trust radius nearly every time),
 standard errors without the renders' Monte-Carlo part (too few refinement steps to measure it), two
 parameters that trade off almost perfectly, and a holdout residual that stays far above the
-photographs' noise (the model leaves out physics, or the fit stopped in a wrong minimum). They
+photographs' noise (the model leaves out physics, or the fit stopped in a wrong minimum), and a
+last polish along the objective that did not reach its minimum. They
 are written to ``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the
 report, as :mod:`abs.sampling.checks` does for posteriors.
 """
@@ -19,7 +20,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["run_checks", "PLAUSIBLE_RANGES", "HOLDOUT_NOISE_FACTOR", "TRADE_OFF_CORRELATION",
+__all__ = ["run_checks", "at_bound", "PLAUSIBLE_RANGES", "HOLDOUT_NOISE_FACTOR", "TRADE_OFF_CORRELATION",
            "NOISE_WALK_SHARE"]
 
 #: Physically plausible values by ``(material type, field)``: what real materials of that type
@@ -56,7 +57,9 @@ _WALK_CLEAR_OF_BOUND = 2.0
 _AT_BOUND = 1e-3
 
 
-def _at_bound(value: float, lower: float, upper: float) -> str | None:
+def at_bound(value: float, lower: float, upper: float) -> str | None:
+    """Which bound ``value`` sits at (``"lower bound 0"``), or ``None``: within ``_AT_BOUND`` of
+    it, relative to the bound's size (at least 1)."""
     for bound, word in ((lower, "lower"), (upper, "upper")):
         if np.isfinite(bound) and abs(value - bound) <= _AT_BOUND * max(1.0, abs(bound)):
             return f"{word} bound {bound:g}"
@@ -145,7 +148,7 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
                         "noise may dominate), add views that show it, tie channels or give a "
                         "prior.")
         for i, v in enumerate(values):
-            hit = _at_bound(float(v), lower, upper)
+            hit = at_bound(float(v), lower, upper)
             if hit:
                 checks.append(f"{name}[{i}] = {v:.4g} sits at its {hit}: the optimum lies at or "
                               "beyond it, so the standard error is no symmetric interval. If the "
@@ -169,6 +172,11 @@ def run_checks(summary: Mapping, bounds: Mapping[str, tuple[float, float]],
             "of the values, measured from the scatter of the refinement's points, needs at least "
             f"two points and this fit had {summary['monte_carlo_points']}, so the errors may be "
             "far too small. Fit with --refinement-steps 4 or more.")
+    # A polish that could not put a scalar at the objective's minimum (polish.py) says why.
+    for entry in summary.get("polish") or ():
+        if entry.get("note"):
+            checks.append(f"The polish of {entry['name']} (component {entry['component']}) did not "
+                          f"reach the objective's minimum: {entry['note']}.")
     # Judged on the photographs' share of the covariance when the fit gives it: the refinement's
     # Monte-Carlo error moves the scalars together (an IOR's noisy steps carry every channel's
     # absorption with them), which the standard errors already hold and which says nothing of

@@ -18,10 +18,12 @@ from typing import Callable
 import numpy as np
 
 from abs.fitting.checks import run_checks
-from abs.fitting.laplace import LaplaceApproximation, laplace, monte_carlo_spread, with_monte_carlo_error
+from abs.fitting.laplace import (LaplaceApproximation, laplace, monte_carlo_spread, with_extra_covariance,
+                                 with_monte_carlo_error)
 from abs.fitting.objective import Objective
 from abs.fitting.optimisers import OptimizerState, get
 from abs.fitting.optimisers.lm import pair_seeds
+from abs.fitting.polish import LinePolish, polish, polished_monte_carlo_covariance
 from abs.fitting.scan import channel_curves, default_grid, parabola_minimum
 from abs.fitting.settings import FitSettings, explicit_steps
 from abs.fitting.starts import StartChoice, choose_start
@@ -74,6 +76,7 @@ class FitResult:
     monte_carlo_points: int = 0
     difference_steps: dict[str, DifferenceStep] | None = None
     data_correlation: np.ndarray | None = None  # (P, P), of the photographs' (Laplace) share alone
+    polishes: list[LinePolish] = field(default_factory=list)
     pixel_weights: bool = False  # residuals weighed by the capture's noise images
 
     def summary(self) -> dict:
@@ -120,6 +123,7 @@ class FitResult:
             **({"starts": self.starts.to_dict()} if self.starts is not None else {}),
             **({"difference_steps": {n: d.to_dict() for n, d in self.difference_steps.items()}}
                if self.difference_steps else {}),
+            **({"polish": [p.to_dict() for p in self.polishes]} if self.polishes else {}),
         }
 
 
@@ -262,8 +266,6 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
     state = optimiser.run(objective, state, settings, iteration_done)
 
     theta = vector.to_physical(state.z)
-    scans = _free_scan(objective, theta)
-    after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
     # Uncertainty at the optimum, from renders independent of each other (the Jacobian's own
     # noise): fresh ones, or, from recordings, those of the refinement's seed pairs (the optimum
     # minimises the mean over all pairs, so it depends on any one pair's noise by a share only).
@@ -300,6 +302,22 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
         uncertainty = with_monte_carlo_error(uncertainty, physical(points), physical(scatter),
                                              sequential=optimiser.sequential_points(state))
         monte_carlo_points = len(monte_carlo_spread(points, scatter))
+    polishes = []
+    if settings.polish_spp is not None:
+        # Central differences' secant slopes have their own fixed point; a last parabola
+        # along the objective itself puts those scalars at its minimum (polish.py), the others
+        # moved with them as the photographs' covariance correlates them. The Laplace part
+        # stays the one at the optimiser's estimate, a fraction of a difference step away.
+        z, polishes = polish(objective, state.z, settings.polish_spp, settings.polish_pairs,
+                             settings.seed, {n: d.step for n, d in (steps or {}).items()},
+                             photographs.covariance, photographs.identifiable)
+        theta = vector.to_physical(z)
+        # A polished scalar's Monte-Carlo error is the polish's, not the optimiser's.
+        extra = polished_monte_carlo_covariance(uncertainty.covariance - photographs.covariance,
+                                                vector, polishes)
+        uncertainty = with_extra_covariance(photographs, extra)
+    scans = _free_scan(objective, theta)
+    after = render_views(full, full.observations, theta, eval_spp, settings.seed + 1)
 
     limited = optimiser.limited_steps(state)
     limited = None if limited is None or not len(limited) else vector.split(np.mean(limited, axis=0))
@@ -332,7 +350,7 @@ def fit(scene, capture, parameters=None, settings: FitSettings = FitSettings(),
                        scan=scans, limited=limited, starts=starts,
                        monte_carlo_points=monte_carlo_points, difference_steps=steps,
                        data_correlation=photographs.correlation,
-                       pixel_weights=problem.weights is not None)
+                       pixel_weights=problem.weights is not None, polishes=polishes)
     kinds = {n: (scene.materials[compiled.specs[n].owner].type_name, compiled.specs[n].field)
              for n in names if compiled.specs[n].owner in scene.materials}
     # The scene's own geometry first: coincident surfaces make the renders themselves ambiguous.

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "monte_carlo_spread",
+__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "with_extra_covariance", "monte_carlo_spread",
            "lag1_autocorrelation"]
 
 
@@ -82,6 +82,12 @@ def lag1_autocorrelation(points: np.ndarray) -> np.ndarray:
     return np.where(var > 0, np.sum(x[1:] * x[:-1], axis=0) / np.where(var > 0, var, 1.0), 0.0)
 
 
+def with_extra_covariance(approx: LaplaceApproximation, extra: np.ndarray) -> LaplaceApproximation:
+    """``approx`` with the covariance ``extra`` (P, P) of an independent error added (an
+    estimate's Monte-Carlo error)."""
+    return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)
+
+
 def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
                           scatter: np.ndarray | None = None,
                           sequential: bool = False) -> LaplaceApproximation:
@@ -116,7 +122,7 @@ def with_monte_carlo_error(approx: LaplaceApproximation, points: np.ndarray,
         rho = np.clip(rho + (1 + 3 * rho) / spread.shape[0], 0.0, _MAX_AUTOCORRELATION)
         inflation = np.sqrt((1 + rho) / (1 - rho))
         extra = extra * np.outer(inflation, inflation)
-    return _from_covariance(approx.covariance + extra, approx.pixel_sigma, approx.identifiable)
+    return with_extra_covariance(approx, extra)
 
 
 def laplace(residuals: np.ndarray, jacobian: np.ndarray, prior_sd: np.ndarray | None = None,

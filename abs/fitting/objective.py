@@ -137,6 +137,16 @@ class Objective:
             r = np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
         return r, self._weighted_jacobian(J, dtheta), loss
 
+    def weighted_residuals(self, z: np.ndarray, seed: int, spp: int | None = None) -> np.ndarray:
+        """The weighted residuals alone (no Jacobian: nothing rendered beyond the image) at
+        ``z``, from renders seeded ``seed`` at ``spp`` samples per pixel (default: the
+        settings'), with the priors' rows below."""
+        theta = self.vector.to_physical(z)
+        r = self.problem().residuals(theta, spp or self.settings.spp, seed)[0] / self.sigma
+        if self.has_prior.any():
+            r = np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
+        return r
+
     def jacobian(self, z: np.ndarray, seed: int, spp: int | None = None) -> np.ndarray:
         """The weighted Jacobian alone, from renders seeded ``seed`` (a second, independent
         Jacobian for the cross curvature), at ``spp`` samples per pixel (default: the

@@ -100,6 +100,15 @@ class FitSettings:
         its units): ``"auto"`` chooses each from a pilot of its Jacobian column at the start
         (:mod:`abs.model.difference_steps`; recorded in ``fit.json``); pairs
         ``(("glass.ior", 0.04),)`` give them; empty: each parameter's own.
+    polish_spp : int or None
+        After the optimiser, a last step along the objective itself for every scalar whose
+        derivative is a central difference (an IOR): the vertex of a parabola through the
+        two-seed objective at the estimate and a fifth of its difference step either side
+        (:mod:`abs.fitting.polish`), rendered at this many samples per pixel. ``None``: no
+        polish.
+    polish_pairs : int
+        Seed pairs the polish averages (each renders two images per view at three values);
+        their scatter is the polished scalar's Monte-Carlo error.
     """
 
     method: str = "auto"
@@ -121,6 +130,8 @@ class FitSettings:
     starts: tuple[tuple[str, tuple[float, ...]], ...] = ()
     glass_spp_factor: int = 1
     difference_steps: str | tuple[tuple[str, float], ...] = ()
+    polish_spp: int | None = None
+    polish_pairs: int = 2
 
     def __post_init__(self):
         from abs.fitting.optimisers import names
@@ -133,6 +144,10 @@ class FitSettings:
             raise ValueError("spp, downsample, max_iterations and glass_spp_factor must be >= 1")
         if self.refinement_spp is not None and self.refinement_spp < 1:
             raise ValueError(f"refinement_spp must be >= 1 or None, not {self.refinement_spp}")
+        if self.polish_spp is not None and self.polish_spp < 1:
+            raise ValueError(f"polish_spp must be >= 1 or None, not {self.polish_spp}")
+        if self.polish_pairs < 1:
+            raise ValueError(f"polish_pairs must be >= 1, not {self.polish_pairs}")
         for entry in self.starts:
             if (len(entry) != 2 or not isinstance(entry[0], str) or not len(entry[1])
                     or not all(np.isfinite(float(v)) for v in entry[1])):

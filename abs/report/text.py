@@ -11,7 +11,8 @@ __all__ = ["summary_lines"]
 
 def summary_lines(summary: Mapping) -> list[str]:
     """Where several starts went (when there were any), the difference steps a pilot chose (when
-    one ran), ``name = [value ± stderr, ...] unit`` per parameter, whether pixels were weighed by
+    one ran), where a polish moved a scalar (when one ran), ``name = [value ± stderr, ...] unit``
+    per parameter, whether pixels were weighed by
     the capture's noise images, then RMSE before -> after."""
     lines = []
     starts = summary.get("starts")
@@ -24,6 +25,13 @@ def summary_lines(summary: Mapping) -> list[str]:
     for name, chosen in (summary.get("difference_steps") or {}).items():
         tried = ", ".join(f"{t['step']:.3g}" for t in chosen["tried"])
         lines.append(f"difference step of {name}: {chosen['step']:.3g} (pilot of {tried})")
+    for entry in summary.get("polish") or ():
+        spread = entry["monte_carlo_stderr"]
+        lines.append(f"polish of {entry['name']}[{entry['component']}]: {entry['start']:.6g} -> "
+                     f"{entry['value']:.6g} (the objective's own minimum; "
+                     f"{len(entry['vertices'])} seed pair(s) at {entry['spp']} spp"
+                     + (f", Monte-Carlo ± {spread:.2g}" if spread is not None else "") + ")"
+                     + (f": {entry['note']}" if entry["note"] else ""))
     for name, entry in summary["parameters"].items():
         values = ", ".join(f"{v:.5g} ± {s:.2g}" if s is not None else f"{v:.5g} (unconstrained)"
                            for v, s in zip(entry["value"], entry["stderr"]))

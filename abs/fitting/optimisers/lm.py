@@ -31,8 +31,8 @@ import numpy as np
 from abs.fitting.optimisers import Callback, Optimiser, OptimizerState, register
 
 __all__ = ["LevenbergMarquardt", "LMState", "RefinementState", "levenberg_marquardt",
-           "gauss_newton_refinement", "recording_pairs", "free_refit", "pair_seeds", "cross_curvature",
-           "column_scale", "averaged_refinement_points", "lm_stages"]
+           "gauss_newton_refinement", "recording_pairs", "free_refit", "pair_seeds", "two_seed_value",
+           "cross_curvature", "column_scale", "averaged_refinement_points", "lm_stages"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,6 +332,15 @@ def _two_renders(objective, z, seed: int, factor: int, names=None):
     ra, Ja, la = objective.residuals(z, seed, factor=factor, names=names)
     rb, Jb, lb = objective.residuals(z, seed + 7, factor=factor, names=names)
     return (ra, Ja), (rb, Jb), 0.5 * (la + lb)
+
+
+def two_seed_value(objective, z, seed: int, spp: int | None = None) -> float:
+    """The two-seed objective ``r_A . r_B / 2`` (weighted residuals with the priors' rows) of
+    the pair starting at ``seed`` (:func:`pair_seeds`) at the objective's resolution, without
+    Jacobians; ``spp``: samples per pixel (default: the objective's)."""
+    ra = objective.weighted_residuals(z, seed, spp=spp)
+    rb = objective.weighted_residuals(z, seed + 7, spp=spp)
+    return 0.5 * float(ra @ rb)
 
 
 #: Evaluations of one refit of the free scalars (:func:`free_refit`); each renders nothing.
