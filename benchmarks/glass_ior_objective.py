@@ -16,6 +16,11 @@ standard errors. Two questions tell apart where such an offset comes from:
    derivative is a central difference (step 0.02-0.08, chosen by its pilot), whose secant slope
    has its own fixed point where the image is nonlinear in the IOR.
 
+   This diagnosis led to the fits' polish (:mod:`abs.fitting.polish`, in the glass recipe since
+   2026-11-28), which takes that step with the two-seed objective and several seed pairs. Its
+   results are the glass suite's (``benchmarks/glass_fit.py``); the fitted values read here are
+   the suite's results file's, polished or not.
+
 The captures come from ``benchmarks/glass_fit.py``'s ``--work`` folder (run it first). Cases with a
 simulated sensor are skipped (their values are in data numbers). Writes
 ``benchmarks/results/glass_ior_objective.json``.

@@ -57,9 +57,10 @@ def test_start_points_and_short_settings():
     assert _start_points((("a.x", (1.0, 2.0)), ("b.y", (3.0,)))) == [{"a.x": 1.0, "b.y": 3.0},
                                                                      {"a.x": 2.0, "b.y": 3.0}]
     settings = FitSettings(downsample=2, downsample_schedule=((0, 4), (6, 2)), max_iterations=20,
-                           refinement_steps=16, starts=(("glass.ior", (1.5,)),))
+                           refinement_steps=16, starts=(("glass.ior", (1.5,)),), polish_spp=1024)
     short = short_settings(settings)
     assert (short.downsample, short.downsample_schedule, short.refinement_steps, short.starts) == (4, (), 0, ())
+    assert short.polish_spp is None  # short fits find a basin; only the full fit polishes
 
 
 def test_parse_starts_and_settings_refuse_bad_values():
