@@ -88,7 +88,8 @@ REFINEMENT = {"llvm": dict(refinement_steps=12, refinement_spp=256),
 #: central differences have their own fixed point where the image is nonlinear in the IOR: the
 #: glass suite's clear sphere fitted 1.4721 for 1.47). On 2 cores three pairs at 1024 spp take
 #: about two minutes on the suite's spheres, and single pairs' vertices scatter by 0.0003 to
-#: 0.0013 there (offsets a fifth of the chosen difference step either side).
+#: 0.0013 there (offsets a fifth of the chosen difference step either side). The GPU's 4096 spp
+#: is not yet measured.
 POLISH = {"llvm": dict(polish_spp=1024, polish_pairs=3), "cuda": dict(polish_spp=4096, polish_pairs=3)}
 #: IORs the short fits start from: real glasses' range (abs.fitting.checks.PLAUSIBLE_RANGES,
 #: 1.45 to 1.8) in steps of 0.1, about the width of a basin at the coarse stage.

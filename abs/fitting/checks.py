@@ -9,9 +9,9 @@ than the photographs moved (its refinement steps cut to the trust radius nearly 
 standard errors without the renders' Monte-Carlo part (too few refinement steps to measure it), two
 parameters that trade off almost perfectly, and a holdout residual that stays far above the
 photographs' noise (the model leaves out physics, or the fit stopped in a wrong minimum), and a
-last polish along the objective that did not reach its minimum. They
-are written to ``fit.json`` (``checks``), printed by ``abs fit`` and shown at the top of the
-report, as :mod:`abs.sampling.checks` does for posteriors.
+last polish along the objective that did not reach its minimum. They are written to ``fit.json``
+(``checks``), printed by ``abs fit`` and shown at the top of the report, as
+:mod:`abs.sampling.checks` does for posteriors.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["run_checks", "at_bound", "PLAUSIBLE_RANGES", "HOLDOUT_NOISE_FACTOR", "TRADE_OFF_CORRELATION",
-           "NOISE_WALK_SHARE"]
+__all__ = ["run_checks", "at_bound", "PLAUSIBLE_RANGES", "HOLDOUT_NOISE_FACTOR",
+           "TRADE_OFF_CORRELATION", "NOISE_WALK_SHARE"]
 
 #: Physically plausible values by ``(material type, field)``: what real materials of that type
 #: have. A fit outside them has almost surely found a wrong basin. Glass IORs: optical and

@@ -12,8 +12,8 @@ __all__ = ["summary_lines"]
 def summary_lines(summary: Mapping) -> list[str]:
     """Where several starts went (when there were any), the difference steps a pilot chose (when
     one ran), where a polish moved a scalar (when one ran), ``name = [value ± stderr, ...] unit``
-    per parameter, whether pixels were weighed by
-    the capture's noise images, then RMSE before -> after."""
+    per parameter, whether pixels were weighed by the capture's noise images, then RMSE before
+    -> after."""
     lines = []
     starts = summary.get("starts")
     if starts:
