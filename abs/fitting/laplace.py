@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "with_extra_covariance", "monte_carlo_spread",
-           "lag1_autocorrelation"]
+__all__ = ["LaplaceApproximation", "laplace", "with_monte_carlo_error", "with_extra_covariance",
+           "monte_carlo_spread", "lag1_autocorrelation"]
 
 
 @dataclass(frozen=True)
