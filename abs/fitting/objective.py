@@ -93,6 +93,13 @@ class Objective:
         s = self.settings
         return self.model.problem("train", s.downsample if factor is None else factor, s.clamp)
 
+    def _with_priors(self, r: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """``r / sigma``, with the priors' rows ``(theta - mean) / sd`` below."""
+        r = r / self.sigma
+        if self.has_prior.any():
+            return np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
+        return r
+
     def _weighted_jacobian(self, J: np.ndarray, dtheta: np.ndarray) -> np.ndarray:
         """``d(r / sigma) / dz``, with the priors' rows below."""
         J = J * dtheta / self.sigma
@@ -132,20 +139,15 @@ class Objective:
         r, J = self.problem(factor).residuals(theta, spp or s.spp, seed, jacobian=True,
                                               jacobian_seed=jacobian_seed, names=names)
         loss = float(np.sqrt(np.mean(r ** 2)))
-        r = r / self.sigma
-        if self.has_prior.any():
-            r = np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
-        return r, self._weighted_jacobian(J, dtheta), loss
+        return self._with_priors(r, theta), self._weighted_jacobian(J, dtheta), loss
 
     def weighted_residuals(self, z: np.ndarray, seed: int, spp: int | None = None) -> np.ndarray:
         """The weighted residuals alone (no Jacobian: nothing rendered beyond the image) at
         ``z``, from renders seeded ``seed`` at ``spp`` samples per pixel (default: the
         settings'), with the priors' rows below."""
         theta = self.vector.to_physical(z)
-        r = self.problem().residuals(theta, spp or self.settings.spp, seed)[0] / self.sigma
-        if self.has_prior.any():
-            r = np.concatenate([r, ((theta - self.prior_mean) / self.prior_sd)[self.has_prior]])
-        return r
+        r = self.problem().residuals(theta, spp or self.settings.spp, seed)[0]
+        return self._with_priors(r, theta)
 
     def jacobian(self, z: np.ndarray, seed: int, spp: int | None = None) -> np.ndarray:
         """The weighted Jacobian alone, from renders seeded ``seed`` (a second, independent
